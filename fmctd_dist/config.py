@@ -1,0 +1,364 @@
+"""Structured configs: dataclass defaults <- configs/<group>/<name>.yaml <- ``key=value`` overrides.
+
+Every job builds its config with :func:`load_config`; nothing else reads YAML. Unknown keys,
+unknown group names and ill-typed values raise one :class:`ConfigError` with a suggestion,
+and :func:`validate` checks the fields that depend on each other (horizons, budgets, seeds)
+before any dataset, model or Ray actor is touched.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from omegaconf import MISSING, OmegaConf
+from omegaconf.errors import OmegaConfBaseException
+
+from fmctd_dist.errors import ConfigError, did_you_mean, unknown_name
+
+REPO_ROOT = Path(__file__).resolve().parent.parent
+CONFIG_DIR = REPO_ROOT / "configs"
+
+MAZES = ("medium", "large", "giant")
+ENV_NAMES = tuple(f"pointmaze-{m}" for m in MAZES)
+TASK_IDS = (1, 2, 3, 4, 5)
+DEVICES = ("cpu", "cuda", "auto")
+RUNNERS = ("local", "ray")
+PLANNERS = ("mctd", "diffusion_forcing", "diffuser")
+PROTOCOLS = ("fixed", "ogbench")
+
+# Top-level shorthands accepted on the command line (`tasks=[1] seeds=[0] runner=local`).
+ALIASES = {"tasks": "eval.tasks", "seeds": "eval.seeds", "runner": "eval.runner"}
+# Keys whose value names a YAML file under configs/<group>/ instead of a plain value.
+GROUPS = ("env", "method")
+
+
+@dataclass
+class EnvConfig:
+    name: str = "pointmaze-medium"  # pointmaze-{medium,large,giant}
+    protocol: str = "fixed"  # fixed: start/goal at cell centres (paper); ogbench: stock +-1 noise
+    max_steps: int = 500  # env step budget of one evaluation episode (500/500/1000)
+    horizon: int = 500  # planning horizon in env steps; plan frames = horizon / jump
+
+
+@dataclass
+class DataConfig:
+    root: str = "data"  # dataset cache dir (relative paths are under the repo root)
+    seed: int = 0  # generator seed: same seed -> same bytes
+    episodes: int = 1000  # training episodes (OGBench navigate: 1000, giant 500)
+    episode_steps: int = 1001  # steps per episode (OGBench: 1001, giant 2001)
+    noise: float = 0.5  # oracle action noise std (OGBench pointmaze: 0.5)
+    val_fraction: float = 0.1  # extra validation episodes as a fraction of `episodes`
+    train_window: int = 500  # raw env steps in one training window (= env.horizon)
+
+
+@dataclass
+class ModelConfig:
+    kind: str = "df"  # df: Diffusion Forcing transformer
+    frame_stack: int = 10  # frames per token
+    width: int = 128  # d_model (paper 128)
+    layers: int = 12  # transformer layers (paper 12)
+    heads: int = 4  # attention heads (paper 4)
+    ff: int = 512  # feed-forward width (paper 512)
+
+
+@dataclass
+class DiffusionConfig:
+    timesteps: int = 1000  # training diffusion steps, linear betas
+    levels: int = 50  # DDIM sampling levels
+    beta_start: float = 1e-4
+    beta_end: float = 0.02
+    stabilization: int = 10  # clean tokens are fed as timestep stabilization-1
+    snr_clip: float = 5.0  # min-SNR loss weight clip
+    clip_noise: float = 20.0  # initial noise clipped to +-clip_noise
+
+
+@dataclass
+class TrainConfig:
+    max_steps: int = 20000  # optimiser steps (paper 200k on GPU; see docs/results.md)
+    batch_size: int = 256
+    lr: float = 5e-4
+    weight_decay: float = 1e-4
+    warmup: int = 1000  # linear warm-up steps
+    ckpt_every: int = 500  # steps between resumable checkpoints
+    val_every: int = 1000  # steps between validation-loss evaluations
+    val_batches: int = 8  # batches per validation-loss evaluation
+    seed: int = 0
+    out: str = ""  # checkpoint dir; "" -> checkpoints/<env>-h<jump>
+    threads: int = 0  # torch intra-op threads; 0 = torch default
+
+
+@dataclass
+class MethodConfig:
+    name: str = "fast-mctd"
+    planner: str = "mctd"  # mctd | diffusion_forcing | diffuser
+    parallel: int = 200  # K: rollouts per iteration (1 = sequential MCTD)
+    virtual_weight: float = 1.0  # w: weight of virtual visits in UCT
+    redundancy_aware: bool = True  # each empty slot claimed at most once per batch
+    leaf_parallel: bool = False  # a selected child gets |children| virtual visits
+    guidance_scales: list[float] = field(default_factory=lambda: [0.0, 0.1, 0.5, 1.0, 2.0])
+    budget: int = 500  # expansion budget (expanded nodes)
+    segment_transitions: int = 20  # DDIM transitions per tree depth
+    sim_skip: int = 10  # jumpy simulation: rows skipped per transition
+    warp_threshold: float = 2.0  # max plan step (world units) before a plan is a warp
+    goal_radius: float = 2.0  # value: plan reaches goal within this radius
+    bad_plan_tries: int = 10  # re-sample plans that barely move
+    bad_plan_step: float = 0.1  # a plan "barely moves" if every step is below this
+    uct_c: float = 1.4142135623730951
+    early_stop: bool = True  # stop when a new node's own plan reaches the goal
+    replan_every: int = 0  # env steps between replans; 0 = plan once (open loop)
+    guidance_scale: float = 2.0  # fixed scale for planners without search
+
+
+@dataclass
+class EvalConfig:
+    runner: str = "local"  # local | ray
+    tasks: list[int] = field(default_factory=lambda: [1, 2, 3, 4, 5])
+    seeds: list[int] = field(default_factory=lambda: list(range(10)))
+    out: str = "results"  # results root; rows go to <out>/<run>/<method>/<env>/...
+    run: str = "default"
+    episode_time_limit: float = 0.0  # seconds of planning per episode; 0 = none
+
+
+@dataclass
+class RayConfig:
+    address: str = ""  # "" -> join a running cluster if there is one, else start local
+    denoiser_actors: int = 1
+    env_actors: int = 2
+    micro_batch: int = 64  # M: jobs per denoiser call (fixed shapes -> determinism)
+    num_gpus: float = 0.0  # per denoiser actor
+    num_cpus: float = 1.0  # per denoiser actor
+    call_timeout_s: float = 300.0  # a micro-batch slower than this is re-routed
+
+
+@dataclass
+class Config:
+    env: EnvConfig = field(default_factory=EnvConfig)
+    data: DataConfig = field(default_factory=DataConfig)
+    model: ModelConfig = field(default_factory=ModelConfig)
+    diffusion: DiffusionConfig = field(default_factory=DiffusionConfig)
+    train: TrainConfig = field(default_factory=TrainConfig)
+    method: MethodConfig = field(default_factory=MethodConfig)
+    eval: EvalConfig = field(default_factory=EvalConfig)
+    ray: RayConfig = field(default_factory=RayConfig)
+    jump: int = 1  # H: plan on trajectories subsampled every H env steps (S-MCTD)
+    device: str = "cpu"  # cpu | cuda | auto
+    checkpoint: str = ""  # checkpoint dir; "" -> checkpoints/<env>-h<jump>
+    seed: int = 0  # planning seed offset (episode seeds come from eval.seeds)
+
+    # ---- derived quantities (read-only helpers) ----
+    @property
+    def plan_frames(self) -> int:
+        """Frames in one plan (excluding the start frame)."""
+        return self.env.horizon // self.jump
+
+    @property
+    def plan_tokens(self) -> int:
+        """P: plan tokens, excluding the context token."""
+        return self.plan_frames // self.model.frame_stack
+
+    @property
+    def n_tokens(self) -> int:
+        """Tokens the model sees: context + P plan tokens."""
+        return self.plan_tokens + 1
+
+    @property
+    def token_dim(self) -> int:
+        return 2 * self.model.frame_stack
+
+    def checkpoint_dir(self) -> Path:
+        return resolve_path(self.checkpoint or f"checkpoints/{self.env.name}-h{self.jump}")
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    def digest(self) -> str:
+        """Short hash of the whole config (recorded with every result row)."""
+        blob = json.dumps(self.to_dict(), sort_keys=True).encode()
+        return hashlib.sha256(blob).hexdigest()[:16]
+
+
+def resolve_path(p: str | Path) -> Path:
+    p = Path(p).expanduser()
+    return p if p.is_absolute() else REPO_ROOT / p
+
+
+def _all_keys(node: Any, prefix: str = "") -> list[str]:
+    keys = []
+    for f in dataclasses.fields(node):
+        value = getattr(node, f.name)
+        name = f"{prefix}{f.name}"
+        if dataclasses.is_dataclass(value):
+            keys.extend(_all_keys(value, name + "."))
+        else:
+            keys.append(name)
+    return keys
+
+
+def group_names(group: str) -> list[str]:
+    return sorted(p.stem for p in (CONFIG_DIR / group).glob("*.yaml"))
+
+
+def _group_file(group: str, name: str) -> Any:
+    path = CONFIG_DIR / group / f"{name}.yaml"
+    if not path.is_file():
+        raise unknown_name(group, name, group_names(group))
+    return OmegaConf.load(path)
+
+
+def _merge(base: Any, update: Any, where: str) -> Any:
+    try:
+        return OmegaConf.merge(base, update)
+    except OmegaConfBaseException as e:
+        key = getattr(e, "full_key", "") or ""
+        msg = str(getattr(e, "msg", e)).splitlines()[0]
+        valid = _all_keys(Config())
+        if key in valid:
+            raise ConfigError(f"{where}: {key}: {msg}; expected {_type_name(key)}") from None
+        raise ConfigError(f"{where}: unknown config key {key!r}{did_you_mean(key, valid)}") from None
+
+
+def _type_name(dotted: str) -> str:
+    node: Any = Config()
+    *parents, leaf = dotted.split(".")
+    for part in parents:
+        node = getattr(node, part)
+    ftype = {f.name: f.type for f in dataclasses.fields(node)}[leaf]
+    return str(ftype).replace("typing.", "")
+
+
+def parse_overrides(args: list[str]) -> tuple[dict[str, str], list[tuple[str, str]]]:
+    """Split CLI words into group selections (env=..., method=...) and dotted overrides."""
+    groups: dict[str, str] = {}
+    dotted: list[tuple[str, str]] = []
+    valid = _all_keys(Config())
+    for arg in args:
+        if "=" not in arg:
+            raise ConfigError(f"override {arg!r} is not key=value; e.g. env=pointmaze-giant or train.max_steps=200")
+        key, value = arg.split("=", 1)
+        key = ALIASES.get(key.strip(), key.strip())
+        if key in GROUPS:
+            groups[key] = value.strip()
+        elif key in valid:
+            dotted.append((key, value))
+        else:
+            raise ConfigError(f"unknown config key {key!r}{did_you_mean(key, valid + list(GROUPS) + list(ALIASES))}")
+    return groups, dotted
+
+
+def load_config(args: list[str] | None = None, *, env: str = "pointmaze-medium", method: str = "fast-mctd") -> Config:
+    """Build and validate a Config from group defaults and ``key=value`` words.
+
+    Order: dataclass defaults, configs/env/<env>.yaml, configs/method/<method>.yaml, then
+    dotted overrides in the order given. ``env``/``method`` give the default group names.
+    """
+    groups, dotted = parse_overrides(list(args or []))
+    cfg = OmegaConf.structured(Config)
+    cfg = _merge(cfg, _group_file("env", groups.get("env", env)), "configs/env")
+    cfg = _merge(cfg, _group_file("method", groups.get("method", method)), "configs/method")
+    for key, value in dotted:
+        try:
+            parsed = OmegaConf.create({"v": OmegaConf.from_dotlist([f"v={value}"]).v}).v  # YAML-typed value
+        except OmegaConfBaseException as e:
+            raise ConfigError(f"{key}={value!r} could not be parsed: {e}") from None
+        upd = OmegaConf.create()
+        OmegaConf.update(upd, key, parsed, force_add=True)
+        cfg = _merge(cfg, upd, f"override {key}={value}")
+    obj: Config = OmegaConf.to_object(cfg)  # type: ignore[assignment]
+    validate(obj)
+    return obj
+
+
+def config_from_dict(d: dict[str, Any]) -> Config:
+    """Rebuild a Config from ``Config.to_dict()`` output (checkpoint manifests, Ray payloads)."""
+    cfg = _merge(OmegaConf.structured(Config), OmegaConf.create(d), "config dict")
+    return OmegaConf.to_object(cfg)  # type: ignore[return-value]
+
+
+def validate(cfg: Config) -> None:
+    """Cross-field checks; raise one ConfigError naming the field and the fix."""
+    if cfg.env.name not in ENV_NAMES:
+        raise unknown_name("env.name", cfg.env.name, ENV_NAMES)
+    if cfg.env.protocol not in PROTOCOLS:
+        raise unknown_name("env.protocol", cfg.env.protocol, PROTOCOLS)
+    if cfg.device not in DEVICES:
+        raise unknown_name("device", cfg.device, DEVICES)
+    if cfg.eval.runner not in RUNNERS:
+        raise unknown_name("eval.runner", cfg.eval.runner, RUNNERS)
+    if cfg.method.planner not in PLANNERS:
+        raise unknown_name("method.planner", cfg.method.planner, PLANNERS)
+    _positive(cfg, "jump", "env.max_steps", "env.horizon", "model.frame_stack", "data.episodes",
+              "data.episode_steps", "data.train_window", "train.max_steps", "train.batch_size",
+              "train.ckpt_every", "method.parallel", "method.budget", "method.segment_transitions",
+              "method.sim_skip", "ray.denoiser_actors", "ray.env_actors", "ray.micro_batch",
+              "diffusion.levels", "diffusion.timesteps")
+    _non_negative(cfg, "data.seed", "train.seed", "seed", "method.virtual_weight", "data.noise",
+                  "method.replan_every", "eval.episode_time_limit", "ray.num_gpus")
+    step = cfg.jump * cfg.model.frame_stack
+    if cfg.env.horizon % step:
+        raise ConfigError(
+            f"env.horizon={cfg.env.horizon} is not divisible by jump x model.frame_stack = "
+            f"{cfg.jump} x {cfg.model.frame_stack} = {step}; pick a horizon that is a multiple of {step}"
+        )
+    if cfg.data.train_window % step:
+        raise ConfigError(
+            f"data.train_window={cfg.data.train_window} is not divisible by jump x model.frame_stack = {step}; "
+            f"use a multiple of {step} (normally data.train_window = env.horizon)"
+        )
+    if cfg.data.train_window != cfg.env.horizon:
+        raise ConfigError(
+            f"data.train_window={cfg.data.train_window} differs from env.horizon={cfg.env.horizon}: the model is "
+            "trained on windows of the planning horizon; set both to the same number of env steps"
+        )
+    if cfg.data.train_window + 1 > cfg.data.episode_steps:
+        raise ConfigError(
+            f"data.train_window={cfg.data.train_window} needs episodes of at least {cfg.data.train_window + 1} "
+            f"steps but data.episode_steps={cfg.data.episode_steps}; raise data.episode_steps"
+        )
+    if cfg.env.horizon > cfg.env.max_steps:
+        raise ConfigError(
+            f"env.horizon={cfg.env.horizon} exceeds env.max_steps={cfg.env.max_steps}; a plan cannot be longer "
+            "than the episode budget"
+        )
+    if not 0 <= cfg.data.val_fraction <= 1:
+        raise ConfigError(f"data.val_fraction={cfg.data.val_fraction} must be in [0, 1]")
+    if not cfg.method.guidance_scales:
+        raise ConfigError("method.guidance_scales is empty; give at least one scale, e.g. [0, 0.1, 0.5, 1, 2]")
+    if cfg.method.sim_skip > cfg.method.segment_transitions:
+        raise ConfigError(
+            f"method.sim_skip={cfg.method.sim_skip} exceeds method.segment_transitions={cfg.method.segment_transitions}"
+        )
+    bad_tasks = [t for t in cfg.eval.tasks if t not in TASK_IDS]
+    if bad_tasks or not cfg.eval.tasks:
+        raise ConfigError(f"eval.tasks={cfg.eval.tasks} must be a non-empty list drawn from {list(TASK_IDS)}")
+    bad_seeds = [s for s in cfg.eval.seeds if not isinstance(s, int) or s < 0]
+    if bad_seeds or not cfg.eval.seeds:
+        raise ConfigError(f"eval.seeds={cfg.eval.seeds} must be a non-empty list of non-negative integers")
+    if cfg.ray.num_gpus > 0 and cfg.device == "cpu":
+        raise ConfigError("ray.num_gpus > 0 but device=cpu; set device=cuda (or auto) to plan on GPUs")
+
+
+def _get(cfg: Config, dotted: str) -> Any:
+    node: Any = cfg
+    for part in dotted.split("."):
+        node = getattr(node, part)
+    return node
+
+
+def _positive(cfg: Config, *keys: str) -> None:
+    for key in keys:
+        if _get(cfg, key) <= 0:
+            raise ConfigError(f"{key}={_get(cfg, key)} must be > 0")
+
+
+def _non_negative(cfg: Config, *keys: str) -> None:
+    for key in keys:
+        if _get(cfg, key) < 0:
+            raise ConfigError(f"{key}={_get(cfg, key)} must be >= 0")
+
+
+__all__ = ["Config", "load_config", "validate", "config_from_dict", "resolve_path", "MISSING"]

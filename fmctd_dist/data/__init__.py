@@ -1,0 +1,1 @@
+"""Offline data: oracle, navigate datasets (.npz + manifest), training windows, token codec."""

@@ -1,0 +1,1 @@
+"""Denoiser protocol and its implementations (in-process and Ray actor pool)."""

@@ -1,0 +1,91 @@
+"""The Denoiser protocol: the only thing a planner asks of a diffusion model.
+
+A job is one partially denoised token sequence plus the per-transition noise levels it
+must go through. Expansion (20 pyramid rows) and jumpy simulation (every 10th row + final)
+are the same call, so one protocol serves MCTD, P-MCTD, S-MCTD, Fast-MCTD and the baselines.
+Arrays are numpy (no torch here): the search imports this module and stays framework-free.
+A denoiser is a pure function of its inputs; all randomness (initial noise) is drawn by the
+tree owner from per-job seeds, so results do not depend on batching or on which actor ran.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class DenoiseBatch:
+    """B independent jobs.
+
+    x:      [B, T, D] float32  token sequences (token 0 = clean context, normalised space)
+    levels: [B, R+1, T] int64  noise level of every token before/after each of R transitions;
+            row r -> row r+1 is one DDIM transition. Padding rows repeat the last row (no-op).
+    scale:  [B] float32        guidance scale per job (0 = unguided)
+    start:  [B, d] float32     start position, normalised (guidance target for the context)
+    goal:   [B, d] float32     goal position, normalised (guidance target for plan frames)
+    """
+
+    x: np.ndarray
+    levels: np.ndarray
+    scale: np.ndarray
+    start: np.ndarray
+    goal: np.ndarray
+
+    def __post_init__(self) -> None:
+        b, t, _ = self.x.shape
+        assert self.levels.ndim == 3 and self.levels.shape[0] == b and self.levels.shape[2] == t, (
+            f"levels {self.levels.shape} does not match x {self.x.shape}"
+        )
+        assert self.scale.shape == (b,), f"scale {self.scale.shape} != ({b},)"
+        assert self.start.shape[0] == b and self.goal.shape[0] == b
+
+    @property
+    def size(self) -> int:
+        return int(self.x.shape[0])
+
+    def take(self, idx: np.ndarray | slice) -> "DenoiseBatch":
+        """Sub-batch (used to cut micro-batches in job order)."""
+        return DenoiseBatch(self.x[idx], self.levels[idx], self.scale[idx], self.start[idx], self.goal[idx])
+
+
+@dataclass
+class DenoiseResult:
+    """x: [B, T, D] tokens after the last transition; x0: [B, T, D] the model's final x0 estimate."""
+
+    x: np.ndarray
+    x0: np.ndarray
+    denoise_time_s: float = 0.0  # wall time inside the model calls (summed over micro-batches)
+    retries: int = 0  # micro-batches re-run after a failure (Ray pool only)
+    stats: dict = field(default_factory=dict)
+
+
+@runtime_checkable
+class Denoiser(Protocol):
+    """Runs a batch of denoising jobs; must be deterministic given the batch."""
+
+    def denoise(self, batch: DenoiseBatch) -> DenoiseResult: ...
+
+
+def concat_batches(batches: list[DenoiseBatch]) -> DenoiseBatch:
+    """Stack batches with possibly different R by padding levels with their last row."""
+    r = max(b.levels.shape[1] for b in batches)
+    levels = [pad_levels(b.levels, r) for b in batches]
+    return DenoiseBatch(
+        np.concatenate([b.x for b in batches]),
+        np.concatenate(levels),
+        np.concatenate([b.scale for b in batches]),
+        np.concatenate([b.start for b in batches]),
+        np.concatenate([b.goal for b in batches]),
+    )
+
+
+def pad_levels(levels: np.ndarray, rows: int) -> np.ndarray:
+    """Pad [B, R+1, T] to [B, rows, T] by repeating the last row (no-op transitions)."""
+    have = levels.shape[1]
+    if have >= rows:
+        return levels
+    tail = np.repeat(levels[:, -1:], rows - have, axis=1)
+    return np.concatenate([levels, tail], axis=1)
