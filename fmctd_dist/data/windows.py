@@ -1,0 +1,69 @@
+"""Training windows, sampled lazily (giant would be GBs if materialised).
+
+A window is ``train_window + 1`` raw steps at any offset, subsampled every ``jump`` steps
+(S-MCTD), normalised, and cut into tokens: token 0 = the first frame repeated (context),
+tokens 1..P = the remaining ``train_window / jump`` frames, ``frame_stack`` per token.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fmctd_dist.data.tokens import Normaliser, context_token, frames_to_tokens
+
+
+class WindowSampler:
+    """Draws [B, P+1, 2*frame_stack] normalised token windows from observations [E, S, 2]."""
+
+    def __init__(self, obs: np.ndarray, train_window: int, jump: int, frame_stack: int, normaliser: Normaliser):
+        e, s, _ = obs.shape
+        assert train_window % (jump * frame_stack) == 0, "train_window must be a multiple of jump * frame_stack"
+        assert s >= train_window + 1, f"episodes of {s} steps are shorter than a window of {train_window + 1}"
+        self.obs = obs
+        self.train_window, self.jump, self.frame_stack = train_window, jump, frame_stack
+        self.normaliser = normaliser
+        self.offsets_per_episode = s - train_window  # every offset, stride 1
+        self.n_windows = e * self.offsets_per_episode
+
+    @property
+    def n_tokens(self) -> int:
+        return self.train_window // (self.jump * self.frame_stack) + 1
+
+    def windows(self, index: np.ndarray) -> np.ndarray:
+        """Window ids [B] (episode * offsets + offset) -> tokens [B, P+1, D]."""
+        ep, off = np.divmod(np.asarray(index, dtype=np.int64), self.offsets_per_episode)
+        steps = off[:, None] + np.arange(0, self.train_window + 1, self.jump)[None, :]  # [B, F+1]
+        frames = self.normaliser.normalise(self.obs[ep[:, None], steps])  # [B, F+1, 2]
+        ctx = context_token(frames[:, 0], self.frame_stack)
+        return np.concatenate([ctx, frames_to_tokens(frames[:, 1:], self.frame_stack)], axis=1).astype(np.float32)
+
+    def sample(self, rng: np.random.Generator, batch: int) -> np.ndarray:
+        return self.windows(rng.integers(0, self.n_windows, size=batch))
+
+
+class TrainData:
+    """What the training loop needs: train sampler, fixed validation batches, digest, normaliser."""
+
+    def __init__(self, train: WindowSampler, val: WindowSampler, digest: str, seed: int):
+        self.train, self.val = train, val
+        self.normaliser = train.normaliser
+        self.digest, self.seed = digest, seed
+
+    @property
+    def n_tokens(self) -> int:
+        return self.train.n_tokens
+
+    def sample(self, rng: np.random.Generator, batch: int) -> np.ndarray:
+        return self.train.sample(rng, batch)
+
+    def val_batches(self, n: int, batch: int) -> list[np.ndarray]:
+        """The same n batches every call (fixed seed), so validation losses are comparable."""
+        rng = np.random.default_rng(np.random.SeedSequence([self.seed, 0x5A11D]))
+        return [self.val.sample(rng, batch) for _ in range(n)]
+
+
+def train_data(cfg, dataset) -> TrainData:
+    """Build train/val samplers for ``cfg`` (jump, window, frame stack) over a NavigateDataset."""
+    kw = dict(train_window=cfg.data.train_window, jump=cfg.jump, frame_stack=cfg.model.frame_stack,
+              normaliser=dataset.normaliser)
+    return TrainData(WindowSampler(dataset.train, **kw), WindowSampler(dataset.val, **kw), dataset.digest, cfg.data.seed)

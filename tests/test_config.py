@@ -1,0 +1,61 @@
+"""Config loading: groups, overrides, aliases, and one clear ConfigError per bad field."""
+
+import pytest
+
+from fmctd_dist.config import Config, config_from_dict, load_config
+from fmctd_dist.errors import ConfigError
+
+
+def test_groups_and_overrides():
+    cfg = load_config(["env=pointmaze-giant", "method=p-mctd", "method.parallel=50", "tasks=[2,3]", "runner=ray"])
+    assert (cfg.env.name, cfg.env.horizon, cfg.data.episodes, cfg.data.episode_steps) == ("pointmaze-giant", 1000, 500, 2001)
+    assert (cfg.method.name, cfg.method.parallel, cfg.jump) == ("p-mctd", 50, 1)
+    assert cfg.eval.tasks == [2, 3] and cfg.eval.runner == "ray"
+    assert cfg.plan_tokens == 100 and cfg.n_tokens == 101
+
+
+def test_fast_mctd_is_sparse_and_parallel():
+    cfg = load_config([])
+    assert (cfg.method.name, cfg.jump, cfg.method.parallel, cfg.method.warp_threshold) == ("fast-mctd", 5, 200, 2.0)
+    assert cfg.plan_tokens == 10 and cfg.checkpoint_dir().name == "pointmaze-medium-h5"
+
+
+def test_round_trip_dict():
+    cfg = load_config(["env=pointmaze-large", "jump=5", "method=s-mctd"])
+    assert config_from_dict(cfg.to_dict()) == cfg
+    assert cfg.digest() == config_from_dict(cfg.to_dict()).digest()
+    assert isinstance(cfg, Config)
+
+
+@pytest.mark.parametrize(
+    "args, field",
+    [
+        (["env=pointmaze-gaint"], "env"),  # unknown env name, with suggestion
+        (["method=fast-mcdt"], "method"),  # unknown method
+        (["method.parralel=3"], "method.parralel"),  # unknown key
+        (["train.max_steps=abc"], "train.max_steps"),  # wrong type
+        (["env.horizon=505"], "env.horizon"),  # not divisible by jump x frame_stack
+        (["env=pointmaze-medium", "jump=3"], "env.horizon"),  # 500 % 30
+        (["seeds=[-1]"], "eval.seeds"),  # negative seed
+        (["tasks=[6]"], "eval.tasks"),  # bad task id
+        (["device=gpu"], "device"),  # unknown device
+        (["env.protocol=noisy"], "env.protocol"),
+        (["data.episode_steps=300"], "data.episode_steps"),  # window longer than episodes
+        (["method.guidance_scales=[]"], "method.guidance_scales"),
+        (["ray.denoiser_actors=0"], "ray.denoiser_actors"),
+        (["method.planner=beam"], "method.planner"),
+        (["horizon"], "key=value"),
+        (["data.train_window=450", "env.horizon=500"], "data.train_window"),
+    ],
+)
+def test_bad_config_names_the_field(args, field):
+    with pytest.raises(ConfigError) as e:
+        load_config(args)
+    assert field in str(e.value)
+
+
+def test_did_you_mean():
+    with pytest.raises(ConfigError, match="did you mean 'pointmaze-giant'"):
+        load_config(["env=pointmaze-gaint"])
+    with pytest.raises(ConfigError, match="did you mean 'method.parallel'"):
+        load_config(["method.parralel=3"])
