@@ -1,0 +1,98 @@
+"""LocalDenoiser: the Denoiser protocol in-process (torch model on cpu or cuda).
+
+Jobs are cut in job order into micro-batches of exactly ``micro_batch`` jobs (the last
+padded with copies of its last job), so every model call has the same shapes whatever the
+batch size, and a job's bits do not depend on how the tree owner batched it (design §4).
+The Ray actors wrap this same class, so one process and N actors run identical code.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from fmctd_dist.config import Config, DiffusionConfig
+from fmctd_dist.denoiser.protocol import DenoiseBatch, DenoiseResult
+from fmctd_dist.device import resolve_device
+from fmctd_dist.diffusion.model import DFTransformer
+from fmctd_dist.diffusion.sampler import make_consts, run_levels
+
+__all__ = ["LocalDenoiser", "resolve_device"]
+
+
+class LocalDenoiser:
+    """Runs DenoiseBatch jobs with a DFTransformer; a pure function of the batch."""
+
+    def __init__(self, model: DFTransformer, diffusion_cfg: DiffusionConfig, device: str = "cpu",
+                 micro_batch: int = 64, digest: str = ""):
+        if micro_batch < 1:
+            raise ValueError(f"micro_batch={micro_batch} must be >= 1")
+        self.device = resolve_device(device)
+        self.model = model.to(self.device).eval()
+        self.model.requires_grad_(False)  # guidance needs d/dx only, never parameter grads
+        self.consts = make_consts(diffusion_cfg, self.device)
+        self.micro_batch = micro_batch
+        self.digest = digest  # checkpoint digest ("" for an in-memory model)
+
+    @classmethod
+    def from_checkpoint(cls, path: str | Path, cfg: Config, device: str | None = None,
+                        micro_batch: int | None = None, expect_digest: str | None = None) -> "LocalDenoiser":
+        """Load and verify a checkpoint against ``cfg`` (device/micro_batch default to cfg's)."""
+        from fmctd_dist.diffusion.checkpoint import load_checkpoint
+
+        model, manifest = load_checkpoint(path, cfg, expect_digest)
+        return cls(model, cfg.diffusion, device or cfg.device, micro_batch or cfg.ray.micro_batch, manifest["digest"])
+
+    def denoise(self, batch: DenoiseBatch) -> DenoiseResult:
+        """x_out, x0 [B, T, D] float32 for B jobs; denoise_time_s = wall time of the model work."""
+        self._check(batch)
+        b, m = batch.size, self.micro_batch
+        xs, x0s, seconds, calls, padded = [], [], 0.0, {}, 0
+        for lo in range(0, b, m):
+            idx = np.arange(lo, min(lo + m, b))
+            pad = m - len(idx)
+            padded += pad
+            idx = np.concatenate([idx, np.full(pad, idx[-1])])
+            x, x0, dt = self._run(batch.take(idx), calls)
+            xs.append(x[: m - pad])
+            x0s.append(x0[: m - pad])
+            seconds += dt
+        t, d = batch.x.shape[1:]
+        empty = np.zeros((0, t, d), np.float32)
+        return DenoiseResult(
+            x=np.concatenate(xs) if xs else empty,
+            x0=np.concatenate(x0s) if x0s else empty,
+            denoise_time_s=seconds,
+            stats={"micro_batches": len(xs), "padded_jobs": padded, "model_calls": calls.get("model_calls", 0),
+                   "device": str(self.device)},
+        )
+
+    def _run(self, mb: DenoiseBatch, stats: dict) -> tuple[np.ndarray, np.ndarray, float]:
+        dev = self.device
+        t0 = time.perf_counter()
+        x, x0 = run_levels(
+            self.model, self.consts,
+            torch.as_tensor(mb.x, dtype=torch.float32, device=dev),
+            torch.as_tensor(mb.levels, dtype=torch.long, device=dev),
+            torch.as_tensor(mb.scale, dtype=torch.float32, device=dev),
+            torch.as_tensor(mb.start, dtype=torch.float32, device=dev),
+            torch.as_tensor(mb.goal, dtype=torch.float32, device=dev),
+            stats,
+        )
+        x, x0 = x.cpu().numpy(), x0.cpu().numpy()  # waits for the device
+        return x, x0, time.perf_counter() - t0
+
+    def _check(self, batch: DenoiseBatch) -> None:
+        d = batch.x.shape[-1]
+        if d != self.model.token_dim:
+            raise ValueError(f"x has token dim {d} but the model expects {self.model.token_dim}")
+        lv = batch.levels
+        if lv.size and (lv.min() < 0 or lv.max() > self.consts.levels):
+            raise ValueError(f"levels must lie in [0, {self.consts.levels}], got [{lv.min()}, {lv.max()}]")
+        if lv.shape[1] > 1 and (np.diff(lv, axis=1) > 0).any():
+            raise ValueError("levels must not increase from one row to the next (no re-noising)")
+        if lv.size and (lv[:, :, 0] != 0).any():
+            raise ValueError("token 0 is the clean context: its level must be 0 in every row")

@@ -1,0 +1,37 @@
+"""Device resolution: the config names the device, and a missing GPU is an error, never a fallback.
+
+A silent CPU fallback would make a "GPU" benchmark or evaluation quietly run on CPU
+(design §10), so ``cuda`` without a visible GPU raises :class:`DeviceError`.
+"""
+
+from __future__ import annotations
+
+import os
+
+import torch
+
+from fmctd_dist.config import DEVICES
+from fmctd_dist.errors import DeviceError, did_you_mean
+
+
+def resolve_device(name: str) -> torch.device:
+    """Map "cpu" | "cuda" | "cuda:N" | "auto" to a torch.device; "auto" takes cuda when there is one."""
+    if name == "cpu":
+        return torch.device("cpu")
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    if name == "cuda" or name.startswith("cuda:"):
+        if not torch.cuda.is_available():
+            raise DeviceError(
+                f"device={name!r} but torch sees no GPU (torch {torch.__version__}, cuda build "
+                f"{torch.version.cuda}, CUDA_VISIBLE_DEVICES={os.environ.get('CUDA_VISIBLE_DEVICES', '<unset>')!r}); "
+                "set device=cpu, or device=auto to use a GPU only where there is one"
+            )
+        dev = torch.device(name)
+        if dev.index is not None and dev.index >= torch.cuda.device_count():
+            n = torch.cuda.device_count()
+            raise DeviceError(f"device={name!r} but only {n} GPU(s) are visible; use device=cuda")
+        return dev
+    raise DeviceError(
+        f"device={name!r} is not known{did_you_mean(name, DEVICES)}; choose one of: {', '.join(DEVICES)}"
+    )

@@ -1,0 +1,211 @@
+"""Diffusion Forcing training loop (reference.md §5), resumable and deterministic per device.
+
+Every token gets its own timestep, so one network learns all the partially-noised
+sequences the pyramid schedule (and hence the tree search) will show it. The loop saves
+model + manifest + train_state every ``ckpt_every`` steps; rerunning the same command
+continues from the last save with optimiser and RNG states restored, so a killed run and
+an uninterrupted one produce the same weights (bitwise on CPU).
+"""
+
+from __future__ import annotations
+
+import subprocess
+import time
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from fmctd_dist.config import REPO_ROOT, Config
+from fmctd_dist.data.tokens import Normaliser
+from fmctd_dist.device import resolve_device
+from fmctd_dist.diffusion.checkpoint import (
+    check_compatible, load_train_state, module_state, save_checkpoint, save_train_state,
+)
+from fmctd_dist.diffusion.model import DFTransformer
+from fmctd_dist.diffusion.schedule import alphas_cumprod, linear_betas
+from fmctd_dist.errors import CheckpointError, DatasetError
+
+CONTEXT_T_MAX = 250  # with prob. 0.5 the context token's timestep is resampled in [0, 250)
+MASKED_WEIGHT = 0.05  # loss weight of tokens past the random terminal (they are pure noise)
+VAL_NOISE_SEED = 12345  # fixed noise for validation so losses are comparable across steps
+LOG_EVERY = 10  # steps between progress-bar updates (each one syncs the device)
+
+
+class TrainDataLike(Protocol):
+    """What the loop needs from a dataset: normalised token windows [B, T, D], token 0 = context."""
+
+    normaliser: Normaliser
+    digest: str
+    seed: int
+
+    def sample(self, rng: np.random.Generator, batch: int) -> np.ndarray: ...
+
+    def val_batches(self, n: int, batch: int) -> list[np.ndarray]: ...
+
+
+def git_sha() -> str:
+    try:
+        out = subprocess.run(["git", "rev-parse", "HEAD"], cwd=REPO_ROOT, capture_output=True, text=True, timeout=10)
+        return out.stdout.strip() if out.returncode == 0 else "unknown"
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+
+
+class DFLoss(torch.nn.Module):
+    """Diffusion Forcing loss: per-token timesteps, length randomisation, min-SNR-weighted x0 MSE."""
+
+    def __init__(self, cfg: Config, device: torch.device):
+        super().__init__()
+        ab = alphas_cumprod(linear_betas(cfg.diffusion.timesteps, cfg.diffusion.beta_start, cfg.diffusion.beta_end))
+        snr = ab / (1.0 - ab)
+        self.register_buffer("sqrt_ab", torch.as_tensor(np.sqrt(ab), dtype=torch.float32, device=device))
+        self.register_buffer("sqrt_1m_ab", torch.as_tensor(np.sqrt(1.0 - ab), dtype=torch.float32, device=device))
+        self.register_buffer("w_snr", torch.as_tensor(np.minimum(snr, cfg.diffusion.snr_clip), dtype=torch.float32,
+                                                      device=device))
+        self.timesteps = cfg.diffusion.timesteps
+        self.clip_noise = cfg.diffusion.clip_noise
+
+    def forward(self, model: DFTransformer, x0: torch.Tensor, gen: torch.Generator) -> torch.Tensor:
+        """x0: [B, T, D] clean normalised tokens -> scalar loss; all randomness from ``gen``."""
+        b, t, _ = x0.shape
+        dev = x0.device
+        k = torch.randint(0, self.timesteps, (b, t), generator=gen, device=dev)
+        ctx = torch.randint(0, CONTEXT_T_MAX, (b,), generator=gen, device=dev)
+        k[:, 0] = torch.where(torch.rand(b, generator=gen, device=dev) < 0.5, ctx, k[:, 0])
+        terminal = torch.randint(2, t + 1, (b, 1), generator=gen, device=dev)  # tokens >= terminal are cut off
+        cut = torch.arange(t, device=dev)[None] >= terminal  # [B, T]
+        k = torch.where(cut, self.timesteps - 1, k)
+        weight = torch.where(cut, MASKED_WEIGHT, 1.0) * self.w_snr[k]  # [B, T]
+        noise = torch.randn(x0.shape, generator=gen, device=dev).clamp(-self.clip_noise, self.clip_noise)
+        xt = self.sqrt_ab[k][..., None] * x0 + self.sqrt_1m_ab[k][..., None] * noise
+        err = (model(xt, k) - x0).square()
+        return (weight[..., None] * err).mean()
+
+
+def lr_at(cfg: Config, step: int) -> float:
+    """Linear warm-up over train.warmup steps, then constant."""
+    w = cfg.train.warmup
+    return cfg.train.lr * (min(1.0, (step + 1) / w) if w > 0 else 1.0)
+
+
+@torch.no_grad()
+def validation_loss(model: DFTransformer, loss_fn: DFLoss, batches: list[torch.Tensor], device: torch.device) -> float:
+    """Mean loss on fixed batches with fixed noise (same generator seed every call)."""
+    was_training = model.training
+    model.eval()
+    gen = torch.Generator(device=device).manual_seed(VAL_NOISE_SEED)
+    total = sum(float(loss_fn(model, x, gen)) for x in batches)
+    model.train(was_training)
+    return total / max(len(batches), 1)
+
+
+def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool = True) -> dict[str, Any]:
+    """Train (or resume) a DFTransformer into out_dir; returns the summary written to the manifest."""
+    device = resolve_device(cfg.device)
+    if cfg.train.threads > 0:
+        torch.set_num_threads(cfg.train.threads)
+    out_dir = Path(out_dir)
+    tc = cfg.train
+
+    with torch.random.fork_rng(devices=[]):  # seeded init without touching the caller's global RNG
+        torch.manual_seed(tc.seed)
+        model = DFTransformer.from_config(cfg.model, cfg.n_tokens).to(device)
+    opt = torch.optim.AdamW(model.parameters(), lr=tc.lr, betas=(0.9, 0.999), weight_decay=tc.weight_decay)
+    loss_fn = DFLoss(cfg, device)
+    rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence([tc.seed, data.seed])))
+    gen = torch.Generator(device=device).manual_seed(tc.seed)
+    step, wall, history, resumed_from = 0, 0.0, {"val": [], "train": []}, None
+
+    state = load_train_state(out_dir)
+    if state is not None:
+        _check_resume(state, cfg, data, out_dir)
+        model.load_state_dict(state["model"])
+        opt.load_state_dict(state["optimizer"])
+        rng.bit_generator.state = state["numpy_rng"]
+        gen.set_state(state["torch_rng"])
+        step, wall, history = int(state["step"]), float(state["wall_time_s"]), state["history"]
+        resumed_from = step
+        if step >= tc.max_steps:
+            return _summary(step, wall, history, out_dir, model, resumed_from)
+
+    val = [torch.as_tensor(v, dtype=torch.float32, device=device) for v in data.val_batches(tc.val_batches,
+                                                                                        tc.batch_size)]
+    base = {"dataset_digest": data.digest, "data_seed": data.seed, "git_sha": git_sha(),
+            "normaliser": {"mean": data.normaliser.mean.tolist(), "std": data.normaliser.std.tolist()}}
+
+    def save() -> None:
+        summary = _summary(step, wall, history, out_dir, model, resumed_from)
+        save_checkpoint(out_dir, model, {**base, "config": cfg.to_dict(), "train_steps": step, "wall_time_s": wall,
+                                         "final_losses": summary["final_losses"], "val_history": history["val"]})
+        save_train_state(out_dir, {
+            "model": module_state(model), "optimizer": opt.state_dict(), "step": step, "wall_time_s": wall,
+            "numpy_rng": rng.bit_generator.state, "torch_rng": gen.get_state(), "history": history,
+            "config": cfg.to_dict(), "dataset_digest": data.digest, "n_tokens": cfg.n_tokens,
+        })
+
+    model.train()
+    bar = tqdm(total=tc.max_steps, initial=step, disable=not progress, desc="train", dynamic_ncols=True)
+    running, n_running, t_log = torch.zeros((), device=device), 0, time.perf_counter()
+    t_seg = time.perf_counter()
+    while step < tc.max_steps:
+        x0 = torch.as_tensor(data.sample(rng, tc.batch_size), dtype=torch.float32, device=device)
+        if x0.shape[1:] != (cfg.n_tokens, cfg.token_dim):
+            raise DatasetError(
+                f"training windows have shape {tuple(x0.shape[1:])} but the config needs (n_tokens, token_dim) = "
+                f"({cfg.n_tokens}, {cfg.token_dim}); data.train_window, env.horizon, jump and model.frame_stack "
+                "must describe the same windows"
+            )
+        for group in opt.param_groups:
+            group["lr"] = lr_at(cfg, step)
+        loss = loss_fn(model, x0, gen)
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        opt.step()
+        step += 1
+        running += loss.detach()
+        n_running += 1
+        if step % LOG_EVERY == 0 or step == tc.max_steps:
+            mean = float(running) / n_running
+            if not np.isfinite(mean):
+                raise FloatingPointError(f"training loss is {mean} at step {step}; lower train.lr or check the data")
+            now = time.perf_counter()
+            history["train"].append([step, mean])
+            bar.set_postfix(loss=f"{mean:.4f}", steps_s=f"{n_running / (now - t_log):.1f}")
+            bar.update(n_running)
+            running, n_running, t_log = torch.zeros((), device=device), 0, now
+        if tc.val_every > 0 and (step % tc.val_every == 0 or step == tc.max_steps):
+            history["val"].append([step, validation_loss(model, loss_fn, val, device)])
+        if step % tc.ckpt_every == 0 or step == tc.max_steps:
+            now = time.perf_counter()
+            wall += now - t_seg
+            t_seg = now
+            save()
+    bar.close()
+    return _summary(step, wall, history, out_dir, model, resumed_from)
+
+
+def _check_resume(state: dict[str, Any], cfg: Config, data: TrainDataLike, out_dir: Path) -> None:
+    """A resumed run must train the same architecture on the same data."""
+    check_compatible({"config": state["config"], "n_tokens": state["n_tokens"]}, cfg, out_dir)
+    if state["dataset_digest"] != data.digest:
+        raise CheckpointError(
+            f"{out_dir} holds a run trained on dataset {state['dataset_digest']} but the data now has digest "
+            f"{data.digest}; use a fresh train.out dir, or regenerate the original dataset"
+        )
+
+
+def _summary(step: int, wall: float, history: dict, out_dir: Path, model: DFTransformer,
+             resumed_from: int | None) -> dict[str, Any]:
+    train_hist, val_hist = history["train"], history["val"]
+    return {
+        "step": step,
+        "wall_time_s": wall,
+        "final_losses": {"train": train_hist[-1][1] if train_hist else None,
+                         "val": val_hist[-1][1] if val_hist else None},
+        "param_count": model.num_params(),
+        "out_dir": str(out_dir),
+        "resumed_from": resumed_from,
+    }

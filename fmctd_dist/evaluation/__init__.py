@@ -1,0 +1,1 @@
+"""Evaluation: one episode (plan -> PD control), per-episode Parquet rows, tables and plots."""

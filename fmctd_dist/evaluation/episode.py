@@ -1,0 +1,81 @@
+"""One PointMaze episode: plan from the current position, follow with the PD controller,
+replan every ``method.replan_every`` env steps (0 = open loop), stop at success or budget.
+
+Returns a result row (design §7); the episode seed only feeds the planner's seeds (and the
+start/goal noise under ``env.protocol=ogbench``), so an episode is a pure function of
+(config, checkpoint, task, seed).
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+
+from fmctd_dist.config import Config
+from fmctd_dist.control.pd import PDController
+from fmctd_dist.envs.pointmaze import PointMaze
+from fmctd_dist.planners.base import Planner, plan_seed
+
+
+def run_episode(cfg: Config, env: PointMaze, planner: Planner, task: int, seed: int,
+                time_limit_s: float | None = None) -> dict[str, Any]:
+    """Run one episode and return its row (without the run-level provenance fields)."""
+    limit = cfg.eval.episode_time_limit if time_limit_s is None else time_limit_s
+    t_episode = time.perf_counter()
+    reset = env.reset(task, seed)
+    pos, goal = reset.obs, reset.goal
+    traj, first_plan = [pos], None
+    steps, success, timed_out = 0, False, False
+    plan_time = denoise_time = 0.0
+    expansions = iterations = retries = n_plans = 0
+    statuses = []
+    while steps < cfg.env.max_steps and not success:
+        out = planner.plan(pos, goal, plan_seed(cfg.seed, task, seed, n_plans))
+        n_plans += 1
+        plan_time += out.plan_time_s
+        denoise_time += out.denoise_time_s
+        expansions, iterations, retries = expansions + out.expansions, iterations + out.iterations, retries + out.retries
+        statuses.append(out.status)
+        first_plan = out.waypoints if first_plan is None else first_plan
+        if out.timed_out or (limit and plan_time > limit):
+            timed_out = True
+            break
+        ctrl = PDController(out.waypoints)
+        for _ in range(min(cfg.method.replan_every or cfg.env.max_steps, cfg.env.max_steps - steps)):
+            pos, success = env.step(ctrl.act(pos))
+            traj.append(pos)
+            steps += 1
+            if success:
+                break
+    return {
+        "method": cfg.method.name,
+        "env": cfg.env.name,
+        "task": int(task),
+        "seed": int(seed),
+        "success": bool(success and not timed_out),
+        "timed_out": timed_out,
+        "env_steps": steps,
+        "plan_time_s": plan_time,
+        "denoise_time_s": denoise_time,
+        "overhead_s": plan_time - denoise_time,
+        "denoise_share": denoise_time / plan_time if plan_time > 0 else 0.0,
+        "expansions": expansions,
+        "iterations": iterations,
+        "retries": retries,
+        "plans": n_plans,
+        "plan_status": ",".join(statuses),
+        "episode_time_s": time.perf_counter() - t_episode,
+        "plan_xy": np.asarray(first_plan, np.float32).reshape(-1).tolist(),
+        "traj_xy": np.asarray(traj, np.float32).reshape(-1).tolist(),
+    }
+
+
+def describe(row: dict[str, Any]) -> str:
+    """One line per episode for logs: outcome, planning time and the share inside the denoiser."""
+    outcome = "success" if row["success"] else ("TIMED OUT" if row["timed_out"] else "failure")
+    return (f"{row['method']} {row['env']} task {row['task']} seed {row['seed']}: {outcome} after "
+            f"{row['env_steps']} steps; planning {row['plan_time_s']:.2f}s "
+            f"({100 * row['denoise_share']:.1f}% in denoiser), {row['expansions']} expansions, "
+            f"{row['iterations']} iterations")

@@ -1,0 +1,33 @@
+"""What every planner returns, and how plan seeds are derived (one visible place)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+
+
+@dataclass
+class PlanOutput:
+    """waypoints: [F_env, 2] world positions, one per env step (sparse plans already repeated H times)."""
+
+    waypoints: np.ndarray
+    status: str
+    plan_time_s: float
+    denoise_time_s: float
+    expansions: int = 0
+    iterations: int = 0
+    denoise_calls: int = 0
+    retries: int = 0
+    timed_out: bool = False
+    extra: dict = field(default_factory=dict)
+
+
+class Planner(Protocol):
+    def plan(self, start: np.ndarray, goal: np.ndarray, seed: int) -> PlanOutput: ...
+
+
+def plan_seed(*keys: int) -> int:
+    """A 63-bit seed from integer keys, e.g. (config seed, task, episode seed, replan index)."""
+    return int(np.random.SeedSequence([int(k) for k in keys]).generate_state(2, dtype=np.uint64)[0] >> np.uint64(1))

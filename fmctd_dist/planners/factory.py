@@ -1,0 +1,16 @@
+"""Config -> planner. Planners never know whether their denoiser is local or a Ray pool."""
+
+from __future__ import annotations
+
+from fmctd_dist.config import Config
+from fmctd_dist.data.tokens import Normaliser
+from fmctd_dist.denoiser.protocol import Denoiser
+from fmctd_dist.errors import unknown_name
+
+
+def make_planner(cfg: Config, denoiser: Denoiser, normaliser: Normaliser, time_limit_s: float = 0.0):
+    if cfg.method.planner == "mctd":
+        from fmctd_dist.planners.mctd import MCTDPlanner
+
+        return MCTDPlanner(cfg, denoiser, normaliser, time_limit_s)
+    raise unknown_name("method.planner", cfg.method.planner, ["mctd"])
