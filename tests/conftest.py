@@ -23,3 +23,34 @@ def tiny_dataset(tmp_path_factory):
 
 TINY_DATA = ["env=pointmaze-medium", "data.episodes=8", "data.episode_steps=301",
              "env.horizon=100", "data.train_window=100"]
+
+
+TINY_MODEL = ["model.width=32", "model.layers=2", "model.heads=2", "model.ff=64"]
+
+
+@pytest.fixture(scope="session")
+def tiny_checkpoint(tiny_dataset, tmp_path_factory):
+    """A tiny dense (jump=1, 10 plan tokens) model trained 30 steps on the tiny dataset."""
+    import torch
+
+    from fmctd_dist.config import load_config
+    from fmctd_dist.data.dataset import load_dataset
+    from fmctd_dist.data.windows import train_data
+    from fmctd_dist.diffusion.train import train
+
+    data_cfg, _ = tiny_dataset
+    out = tmp_path_factory.mktemp("ckpt")
+    args = tiny_args(data_cfg.data.root, out)
+    cfg = load_config(args + ["train.max_steps=30", "train.batch_size=16", "train.ckpt_every=30",
+                              "train.val_every=30", "train.val_batches=1"], method="mctd")
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    train(cfg, train_data(cfg, load_dataset(cfg)), out, progress=False)
+    torch.set_num_threads(threads)
+    return args, out
+
+
+def tiny_args(data_root, ckpt) -> list[str]:
+    """Overrides that describe the tiny dataset + tiny checkpoint (for jobs run as subprocesses)."""
+    return TINY_DATA + TINY_MODEL + [f"data.root={data_root}", f"checkpoint={ckpt}", "env.max_steps=100",
+                                     "jump=1"]

@@ -110,3 +110,21 @@ def test_loss_pieces():
     l1 = loss_fn(model, x0, torch.Generator().manual_seed(1))
     l2 = loss_fn(model, x0, torch.Generator().manual_seed(1))
     assert torch.isfinite(l1) and torch.equal(l1, l2)
+
+
+def test_shipped_checkpoint_without_train_state_is_continued_not_overwritten(tmp_path):
+    """Shipped dirs hold model.pt + manifest only; training there warm-starts from them."""
+    data = FakeData()
+    train(tiny_cfg(10), data, tmp_path, progress=False)
+    (tmp_path / "train_state.pt").unlink()
+    shipped, _ = load_checkpoint(tmp_path, tiny_cfg(10))
+    again = train(tiny_cfg(10), data, tmp_path, progress=False)  # already at max_steps: untouched
+    assert again["step"] == 10 and again["resumed_from"] == 10
+    out = train(tiny_cfg(20), data, tmp_path, progress=False)
+    assert out["resumed_from"] == 10 and out["step"] == 20
+    model, manifest = load_checkpoint(tmp_path, tiny_cfg(20))
+    assert manifest["train_steps"] == 20
+    assert not torch.equal(model.state_dict()["out.weight"], shipped.state_dict()["out.weight"])
+    with pytest.raises(CheckpointError, match="dataset"):
+        (tmp_path / "train_state.pt").unlink()
+        train(tiny_cfg(30), FakeData(digest="other"), tmp_path, progress=False)

@@ -22,7 +22,7 @@ from fmctd_dist.config import REPO_ROOT, Config
 from fmctd_dist.data.tokens import Normaliser
 from fmctd_dist.device import resolve_device
 from fmctd_dist.diffusion.checkpoint import (
-    check_compatible, load_train_state, module_state, save_checkpoint, save_train_state,
+    check_compatible, load_checkpoint, load_train_state, module_state, save_checkpoint, save_train_state,
 )
 from fmctd_dist.diffusion.model import DFTransformer
 from fmctd_dist.diffusion.schedule import alphas_cumprod, linear_betas
@@ -127,6 +127,22 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
         rng.bit_generator.state = state["numpy_rng"]
         gen.set_state(state["torch_rng"])
         step, wall, history = int(state["step"]), float(state["wall_time_s"]), state["history"]
+        resumed_from = step
+        if step >= tc.max_steps:
+            return _summary(step, wall, history, out_dir, model, resumed_from)
+    elif (out_dir / "manifest.json").exists():
+        # A shipped checkpoint (model.pt + manifest, no train_state.pt: that is not committed).
+        # Continue from its weights and step with a fresh optimiser rather than overwrite it.
+        shipped, manifest = load_checkpoint(out_dir, cfg)
+        if manifest["dataset_digest"] != data.digest:
+            raise CheckpointError(
+                f"{out_dir} holds a model trained on dataset {manifest['dataset_digest']} but the data now has "
+                f"digest {data.digest}; use a fresh train.out dir, or regenerate the original dataset"
+            )
+        model.load_state_dict(shipped.state_dict())
+        step, wall = int(manifest["train_steps"]), float(manifest["wall_time_s"])
+        history = {"val": [list(v) for v in manifest.get("val_history", [])], "train": [],
+                   "optimizer_reset_at": [step]}
         resumed_from = step
         if step >= tc.max_steps:
             return _summary(step, wall, history, out_dir, model, resumed_from)

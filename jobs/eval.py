@@ -1,0 +1,46 @@
+"""Evaluate a planner on the PointMaze task x seed grid; one Parquet row per episode, resumable.
+
+    python jobs/eval.py                                         # embedded default (see README)
+    python jobs/eval.py method=fast-mctd env=pointmaze-medium runner=local tasks=[1] seeds=[0]
+    python jobs/eval.py method=p-mctd env=pointmaze-giant eval.run=giant eval.episode_time_limit=120
+
+Everything is validated before any episode (or Ray actor) starts; rerunning an interrupted
+evaluation only runs the missing (task, seed) keys. Prints the paper-style table at the end
+and writes it to <eval.out>/<eval.run>/summary.md.
+"""
+
+import sys
+import time
+
+from fmctd_dist.config import load_config
+from fmctd_dist.errors import FmctdError
+from fmctd_dist.evaluation.grid import prepare, run_local
+from fmctd_dist.evaluation.results import ResultStore, markdown_table, summarise
+
+
+def main(argv: list[str]) -> int:
+    t0 = time.time()
+    cfg = load_config(argv)
+    prepared = prepare(cfg)  # config, device, checkpoint: all checked here
+    store = ResultStore(cfg.eval.out, cfg.eval.run)
+    if cfg.eval.runner == "local":
+        run_local(prepared, store)
+    else:
+        from fmctd_dist.evaluation.ray_runner import run_ray
+
+        run_ray(prepared, store)
+    keys = {(t, s) for t in cfg.eval.tasks for s in cfg.eval.seeds}
+    rows = [r for r in store.rows(cfg.method.name, cfg.env.name) if (r["task"], r["seed"]) in keys]
+    table = markdown_table(summarise(rows))
+    (store.root / "summary.md").write_text(table + "\n")
+    print(table)
+    print(f"{len(rows)} episodes in {store.root}; wall time {time.time() - t0:.1f}s")
+    return 0
+
+
+if __name__ == "__main__":
+    try:
+        sys.exit(main(sys.argv[1:]))
+    except FmctdError as e:
+        print(f"error: {e}", file=sys.stderr)
+        sys.exit(2)

@@ -1,0 +1,117 @@
+"""Planners, episodes and the local eval job with a real (tiny) Diffusion Forcing checkpoint."""
+
+import subprocess
+import sys
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+import torch
+
+from fmctd_dist.config import REPO_ROOT, load_config
+from fmctd_dist.denoiser.local import LocalDenoiser
+from fmctd_dist.diffusion.checkpoint import load_checkpoint, normaliser_from_manifest
+from fmctd_dist.envs import make_env
+from fmctd_dist.evaluation.episode import run_episode
+from fmctd_dist.planners import make_planner, plan_seed
+
+SEARCH = ["method=p-mctd", "method.parallel=8", "method.budget=24", "method.early_stop=false",
+          "method.warp_threshold=1000"]  # an untrained model warps; keep its plans as real outputs
+
+
+@pytest.fixture(autouse=True)
+def one_thread():
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)
+
+
+def planner_for(tiny_checkpoint, micro_batch, *extra):
+    args, ckpt = tiny_checkpoint
+    cfg = load_config(args + SEARCH + list(extra))
+    model, manifest = load_checkpoint(ckpt, cfg)
+    denoiser = LocalDenoiser(model, cfg.diffusion, "cpu", micro_batch=micro_batch)
+    return cfg, make_planner(cfg, denoiser, normaliser_from_manifest(manifest))
+
+
+def test_plan_is_pure_function_of_config_checkpoint_seed(tiny_checkpoint):
+    start, goal = np.array([0.0, 0.0]), np.array([20.0, 20.0])
+    plans = {}
+    for m in (3, 5, 64):  # micro-batches that cut the batches differently (M * T >= 12 rows)
+        cfg, planner = planner_for(tiny_checkpoint, m)
+        plans[m] = planner.plan(start, goal, seed=7)
+        plans[m].tree = planner.last_result.tree
+        again = planner.plan(start, goal, seed=7)
+        assert np.array_equal(plans[m].waypoints, again.waypoints)
+    ref = plans[64]
+    assert ref.status != "stay" and np.abs(np.diff(ref.waypoints, axis=0)).max() > 0
+    assert ref.expansions >= 24 and ref.iterations >= 2
+    for m in (3, 5):
+        assert np.array_equal(plans[m].waypoints, ref.waypoints), f"micro_batch {m} changed the plan"
+        assert plans[m].expansions == ref.expansions
+        n = ref.tree.num_nodes
+        assert np.array_equal(plans[m].tree.x[:n], ref.tree.x[:n])  # every node's denoised payload
+    other = planner_for(tiny_checkpoint, 64)[1].plan(start, goal, seed=8)
+    assert not np.array_equal(other.waypoints, ref.waypoints)
+
+
+def test_plan_seeds_are_distinct_and_stable():
+    assert plan_seed(0, 1, 0, 0) == plan_seed(0, 1, 0, 0)
+    assert len({plan_seed(0, t, s, k) for t in range(1, 6) for s in range(10) for k in range(3)}) == 150
+
+
+def test_episode_row_and_replanning(tiny_checkpoint):
+    cfg, planner = planner_for(tiny_checkpoint, 64, "method.replan_every=30")
+    calls = []
+    real = planner.plan
+    planner.plan = lambda s, g, seed: calls.append(seed) or real(s, g, seed)
+    row = run_episode(cfg, make_env(cfg.env.name), planner, task=3, seed=0)
+    assert row["env_steps"] <= 100 and len(calls) == row["plans"]
+    assert row["success"] or len(calls) == 4  # 100 steps / replan every 30 -> 4 plans
+    assert 0 < row["denoise_time_s"] <= row["plan_time_s"] and row["expansions"] > 0
+    assert len(row["traj_xy"]) == 2 * (row["env_steps"] + 1)
+
+
+def run_eval(args, *extra):
+    return subprocess.run([sys.executable, "jobs/eval.py", *args, *extra], cwd=REPO_ROOT, capture_output=True,
+                          text=True, timeout=600)
+
+
+def test_eval_job_writes_rows_and_resumes(tiny_checkpoint, tmp_path):
+    args, _ = tiny_checkpoint
+    args = args + SEARCH + [f"eval.out={tmp_path}", "eval.run=t", "runner=local", "tasks=[1,3]", "seeds=[0]"]
+    first = run_eval(args)
+    assert first.returncode == 0, first.stderr
+    files = sorted(tmp_path.glob("t/p-mctd/pointmaze-medium/task=*/seed=*.parquet"))
+    assert [f.parent.name for f in files] == ["task=1", "task=3"]
+    row = pq.read_table(files[0]).to_pylist()[0]
+    for key in ("method", "env", "task", "seed", "success", "env_steps", "plan_time_s", "denoise_time_s",
+                "overhead_s", "expansions", "iterations", "retries", "n_denoiser_actors", "device", "git_sha",
+                "checkpoint_digest", "config_hash"):
+        assert key in row
+    mtimes = [f.stat().st_mtime_ns for f in files]
+    second = run_eval(args[:-1] + ["seeds=[0,1]"])  # resume: only the two new keys run
+    assert second.returncode == 0, second.stderr
+    assert [f.stat().st_mtime_ns for f in files] == mtimes
+    assert len(list(tmp_path.glob("t/p-mctd/pointmaze-medium/task=*/seed=*.parquet"))) == 4
+    assert "| p-mctd | pointmaze-medium | 4 |" in second.stdout
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["jump=5"], "jump"),  # sparse planning, dense checkpoint
+    (["model.width=64"], "model.width"),
+    (["device=cuda"], "device"),
+])
+def test_eval_job_bad_input_is_one_clear_error(tiny_checkpoint, tmp_path, extra, message):
+    if extra == ["device=cuda"] and torch.cuda.is_available():
+        pytest.skip("a GPU is present")
+    args, _ = tiny_checkpoint
+    out = run_eval(args + [f"eval.out={tmp_path}"] + extra)
+    assert out.returncode == 2 and out.stderr.startswith("error: ") and message in out.stderr
+    assert "Traceback" not in out.stderr and not list(tmp_path.rglob("*.parquet"))
+
+
+def test_eval_job_missing_checkpoint(tmp_path):
+    out = run_eval([f"checkpoint={tmp_path}/nothing", f"eval.out={tmp_path}"])
+    assert out.returncode == 2 and "checkpoint" in out.stderr and "train.py" in out.stderr
