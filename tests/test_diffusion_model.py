@@ -9,7 +9,7 @@ import pytest
 import torch
 from torch import nn
 
-from fmctd_dist.config import Config, ModelConfig
+from fmctd_dist.config import Config, load_config, ModelConfig
 from fmctd_dist.diffusion.model import DFTransformer, EncoderBlock, SinusoidalEmbedding
 from fmctd_dist.errors import ConfigError
 
@@ -27,7 +27,7 @@ def test_forward_shape_and_dtype():
 
 
 def test_paper_size_parameter_count():
-    cfg = Config()
+    cfg = load_config(["model.layers=12", "jump=1"])  # the paper's size is one override away
     m = DFTransformer.from_config(cfg.model, cfg.n_tokens)
     w, ff, d = 128, 512, 20
     per_layer = (w * 3 * w + 3 * w) + (w * w + w) + 2 * 2 * w + (w * ff + ff) + (ff * w + w)
