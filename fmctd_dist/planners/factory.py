@@ -13,4 +13,8 @@ def make_planner(cfg: Config, denoiser: Denoiser, normaliser: Normaliser, time_l
         from fmctd_dist.planners.mctd import MCTDPlanner
 
         return MCTDPlanner(cfg, denoiser, normaliser, time_limit_s)
-    raise unknown_name("method.planner", cfg.method.planner, ["mctd"])
+    if cfg.method.planner == "diffusion_forcing":
+        from fmctd_dist.planners.diffusion_forcing import DiffusionForcingPlanner
+
+        return DiffusionForcingPlanner(cfg, denoiser, normaliser)
+    raise unknown_name("method.planner", cfg.method.planner, ["mctd", "diffusion_forcing"])
