@@ -84,6 +84,7 @@ class TrainConfig:
     lr: float = 5e-4
     weight_decay: float = 1e-4
     warmup: int = 1000  # linear warm-up steps
+    ema_decay: float = 0.999  # shipped weights are an EMA of the trained ones; 0 = off
     ckpt_every: int = 500  # steps between resumable checkpoints
     val_every: int = 1000  # steps between validation-loss evaluations
     val_batches: int = 8  # batches per validation-loss evaluation

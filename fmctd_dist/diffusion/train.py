@@ -9,6 +9,7 @@ an uninterrupted one produce the same weights (bitwise on CPU).
 
 from __future__ import annotations
 
+import copy
 import subprocess
 import time
 from pathlib import Path
@@ -118,11 +119,13 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
     rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence([tc.seed, data.seed])))
     gen = torch.Generator(device=device).manual_seed(tc.seed)
     step, wall, history, resumed_from = 0, 0.0, {"val": [], "train": []}, None
+    ema = copy.deepcopy(model).requires_grad_(False)  # what gets shipped (ema_decay=0: a plain copy)
 
     state = load_train_state(out_dir)
     if state is not None:
         _check_resume(state, cfg, data, out_dir)
         model.load_state_dict(state["model"])
+        ema.load_state_dict(state.get("ema", state["model"]))  # runs from before EMA start it here
         opt.load_state_dict(state["optimizer"])
         rng.bit_generator.state = state["numpy_rng"]
         gen.set_state(state["torch_rng"])
@@ -140,6 +143,7 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
                 f"digest {data.digest}; use a fresh train.out dir, or regenerate the original dataset"
             )
         model.load_state_dict(shipped.state_dict())
+        ema.load_state_dict(shipped.state_dict())
         step, wall = int(manifest["train_steps"]), float(manifest["wall_time_s"])
         history = {"val": [list(v) for v in manifest.get("val_history", [])], "train": [],
                    "optimizer_reset_at": [step]}
@@ -154,10 +158,12 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
 
     def save() -> None:
         summary = _summary(step, wall, history, out_dir, model, resumed_from)
-        save_checkpoint(out_dir, model, {**base, "config": cfg.to_dict(), "train_steps": step, "wall_time_s": wall,
-                                         "final_losses": summary["final_losses"], "val_history": history["val"]})
+        save_checkpoint(out_dir, ema, {**base, "ema_decay": tc.ema_decay, "config": cfg.to_dict(),
+                                       "train_steps": step, "wall_time_s": wall,
+                                       "final_losses": summary["final_losses"], "val_history": history["val"]})
         save_train_state(out_dir, {
-            "model": module_state(model), "optimizer": opt.state_dict(), "step": step, "wall_time_s": wall,
+            "model": module_state(model), "ema": module_state(ema), "optimizer": opt.state_dict(),
+            "step": step, "wall_time_s": wall,
             "numpy_rng": rng.bit_generator.state, "torch_rng": gen.get_state(), "history": history,
             "config": cfg.to_dict(), "dataset_digest": data.digest, "n_tokens": cfg.n_tokens,
         })
@@ -180,6 +186,7 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
         opt.zero_grad(set_to_none=True)
         loss.backward()
         opt.step()
+        update_ema(ema, model, tc.ema_decay, step)
         step += 1
         running += loss.detach()
         n_running += 1
@@ -193,7 +200,7 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
             bar.update(n_running)
             running, n_running, t_log = torch.zeros((), device=device), 0, now
         if tc.val_every > 0 and (step % tc.val_every == 0 or step == tc.max_steps):
-            history["val"].append([step, validation_loss(model, loss_fn, val, device)])
+            history["val"].append([step, validation_loss(ema, loss_fn, val, device)])
         if step % tc.ckpt_every == 0 or step == tc.max_steps:
             now = time.perf_counter()
             wall += now - t_seg
@@ -201,6 +208,16 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
             save()
     bar.close()
     return _summary(step, wall, history, out_dir, model, resumed_from)
+
+
+@torch.no_grad()
+def update_ema(ema: torch.nn.Module, model: torch.nn.Module, decay: float, step: int) -> None:
+    """ema <- d * ema + (1 - d) * model, with d warmed up as min(decay, (1 + step) / (10 + step))."""
+    d = min(decay, (1 + step) / (10 + step)) if decay > 0 else 0.0
+    for e, p in zip(ema.parameters(), model.parameters()):
+        e.lerp_(p, 1.0 - d)
+    for e, b in zip(ema.buffers(), model.buffers()):
+        e.copy_(b)
 
 
 def _check_resume(state: dict[str, Any], cfg: Config, data: TrainDataLike, out_dir: Path) -> None:
