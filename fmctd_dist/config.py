@@ -30,6 +30,8 @@ DEVICES = ("cpu", "cuda", "auto")
 RUNNERS = ("local", "ray")
 PLANNERS = ("mctd", "diffusion_forcing", "diffuser")
 PROTOCOLS = ("fixed", "ogbench")
+MODEL_KINDS = ("df", "diffuser")
+BETA_SCHEDULES = ("linear", "cosine")  # same names as diffusion.schedule.BETA_SCHEDULES
 
 # Top-level shorthands accepted on the command line (`tasks=[1] seeds=[0] runner=local`).
 ALIASES = {"tasks": "eval.tasks", "seeds": "eval.seeds", "runner": "eval.runner"}
@@ -58,17 +60,20 @@ class DataConfig:
 
 @dataclass
 class ModelConfig:
-    kind: str = "df"  # df: Diffusion Forcing transformer
+    kind: str = "df"  # df: Diffusion Forcing transformer | diffuser: Janner's temporal U-Net
     frame_stack: int = 10  # frames per token
     width: int = 128  # d_model (paper 128)
     layers: int = 6  # transformer layers (paper 12; 6 trains 2x faster on CPU, see docs/results.md)
     heads: int = 4  # attention heads (paper 4)
     ff: int = 512  # feed-forward width (paper 512)
+    unet_channels: list[int] = field(default_factory=lambda: [32, 128, 256])  # kind=diffuser: widths per resolution
+    unet_kernel: int = 5  # kind=diffuser: temporal conv kernel size
 
 
 @dataclass
 class DiffusionConfig:
-    timesteps: int = 1000  # training diffusion steps, linear betas
+    timesteps: int = 1000  # training diffusion steps
+    beta_schedule: str = "linear"  # linear (Diffusion Forcing) | cosine (Diffuser)
     levels: int = 50  # DDIM sampling levels
     beta_start: float = 1e-4
     beta_end: float = 0.02
@@ -130,7 +135,7 @@ class RayConfig:
     address: str = ""  # "" -> join a running cluster if there is one, else start local
     denoiser_actors: int = 1
     env_actors: int = 2
-    micro_batch: int = 64  # M: jobs per denoiser call (fixed shapes -> determinism)
+    micro_batch: int = 8  # M: jobs per denoiser call (fixed shapes -> determinism); raise on GPUs
     num_gpus: float = 0.0  # per denoiser actor
     num_cpus: float = 1.0  # per denoiser actor
     call_timeout_s: float = 300.0  # a micro-batch slower than this is re-routed
@@ -148,7 +153,7 @@ class Config:
     ray: RayConfig = field(default_factory=RayConfig)
     jump: int = 1  # H: plan on trajectories subsampled every H env steps (S-MCTD)
     device: str = "cpu"  # cpu | cuda | auto
-    checkpoint: str = ""  # checkpoint dir; "" -> checkpoints/<env>-h<jump>
+    checkpoint: str = ""  # checkpoint dir; "" -> checkpoints/<env>-h<jump> (model.kind=diffuser: <env>-diffuser)
     seed: int = 0  # planning seed offset (episode seeds come from eval.seeds)
 
     # ---- derived quantities (read-only helpers) ----
@@ -171,8 +176,13 @@ class Config:
     def token_dim(self) -> int:
         return 2 * self.model.frame_stack
 
+    @property
+    def run_name(self) -> str:
+        """<env>-h<jump> (Diffusion Forcing models) or <env>-diffuser: default checkpoint/run dir name."""
+        return f"{self.env.name}-diffuser" if self.model.kind == "diffuser" else f"{self.env.name}-h{self.jump}"
+
     def checkpoint_dir(self) -> Path:
-        return resolve_path(self.checkpoint or f"checkpoints/{self.env.name}-h{self.jump}")
+        return resolve_path(self.checkpoint or f"checkpoints/{self.run_name}")
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
@@ -292,6 +302,23 @@ def validate(cfg: Config) -> None:
         raise unknown_name("eval.runner", cfg.eval.runner, RUNNERS)
     if cfg.method.planner not in PLANNERS:
         raise unknown_name("method.planner", cfg.method.planner, PLANNERS)
+    if cfg.model.kind not in MODEL_KINDS:
+        raise unknown_name("model.kind", cfg.model.kind, MODEL_KINDS)
+    if cfg.diffusion.beta_schedule not in BETA_SCHEDULES:
+        raise unknown_name("diffusion.beta_schedule", cfg.diffusion.beta_schedule, BETA_SCHEDULES)
+    if cfg.model.kind == "diffuser" and cfg.method.planner != "diffuser":
+        raise ConfigError(
+            f"model.kind=diffuser with method.planner={cfg.method.planner}: the U-Net gives all plan tokens one "
+            "noise level, but this planner needs per-token levels; use method=diffuser (or diffuser-replan), "
+            "or model.kind=df"
+        )
+    if cfg.model.kind == "diffuser":
+        ch, k = cfg.model.unet_channels, cfg.model.unet_kernel
+        if not ch or any(c <= 0 or c % 8 for c in ch):
+            raise ConfigError(f"model.unet_channels={ch} must be a non-empty list of positive multiples of 8 "
+                              "(GroupNorm with 8 groups), e.g. [32, 128, 256]")
+        if k < 1 or k % 2 == 0:
+            raise ConfigError(f"model.unet_kernel={k} must be a positive odd number (same-length convs), e.g. 5")
     _positive(cfg, "jump", "env.max_steps", "env.horizon", "model.frame_stack", "data.episodes",
               "data.episode_steps", "data.train_window", "train.max_steps", "train.batch_size",
               "train.ckpt_every", "method.parallel", "method.budget", "method.segment_transitions",
