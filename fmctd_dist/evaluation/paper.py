@@ -1,0 +1,25 @@
+"""The paper's PointMaze numbers (Table "Maze results"), printed beside ours in every report.
+
+(success %, success std, planning time s, time std) per (method, maze). Planning times are
+the authors' GPU times; compare ratios, not seconds, with our CPU runs.
+"""
+
+PAPER_POINTMAZE: dict[str, dict[str, tuple[float, float, float, float]]] = {
+    "diffuser": {"medium": (58, 6, 6.6, 0.1), "large": (44, 8, 6.5, 0.1), "giant": (0, 0, 6.4, 0.1)},
+    "diffuser-replan": {"medium": (60, 0, 40.6, 2.7), "large": (40, 0, 55.1, 1.8), "giant": (0, 0, 137.8, 0.4)},
+    "diffusion-forcing": {"medium": (65, 16, 9.8, 1.0), "large": (74, 9, 12.5, 0.5), "giant": (50, 10, 45.6, 3.2)},
+    "mctd": {"medium": (100, 0, 59.2, 27.1), "large": (98, 6, 174.6, 27.2), "giant": (100, 0, 264.2, 33.8)},
+    "p-mctd": {"medium": (96, 8, 7.4, 1.1), "large": (100, 0, 7.0, 0.6), "giant": (100, 0, 9.8, 1.3)},
+    "s-mctd": {"medium": (100, 0, 9.7, 1.2), "large": (84, 8, 226.1, 114.4), "giant": (100, 0, 18.9, 2.8)},
+    "fast-mctd": {"medium": (100, 0, 3.6, 0.6), "large": (80, 0, 4.1, 0.4), "giant": (100, 0, 2.4, 0.1)},
+}
+
+
+def paper_cell(method: str, env: str) -> str:
+    """'100 ± 0 / 3.6 ± 0.6 s' for a method and an env name like 'pointmaze-medium', or '–'."""
+    maze = env.rsplit("-", 1)[-1]
+    row = PAPER_POINTMAZE.get(method, {}).get(maze)
+    if row is None:
+        return "–"
+    s, sd, t, td = row
+    return f"{s:.0f} ± {sd:.0f} / {t:.1f} ± {td:.1f} s"
