@@ -6,15 +6,18 @@
 
 Everything is validated before any episode (or Ray actor) starts; rerunning an interrupted
 evaluation only runs the missing (task, seed) keys. Prints the paper-style table at the end
-and writes it to <eval.out>/<eval.run>/summary.md.
+and writes it to <eval.out>/<eval.run>/summary.md, with summary.png (success vs planning
+time) and <method>/<env>/episode.png (the first episode's plan and trajectory on the maze).
 """
 
 import sys
 import time
 
 from fmctd_dist.config import load_config
+from fmctd_dist.envs import maze_geometry
 from fmctd_dist.errors import FmctdError
 from fmctd_dist.evaluation.grid import prepare, run_local
+from fmctd_dist.evaluation.plots import plot_episode, plot_success_vs_time
 from fmctd_dist.evaluation.results import ResultStore, markdown_table, summarise
 
 
@@ -31,8 +34,13 @@ def main(argv: list[str]) -> int:
         run_ray(prepared, store)
     keys = {(t, s) for t in cfg.eval.tasks for s in cfg.eval.seeds}
     rows = [r for r in store.rows(cfg.method.name, cfg.env.name) if (r["task"], r["seed"]) in keys]
-    table = markdown_table(summarise(rows))
+    summary = summarise(rows)
+    table = markdown_table(summary)
     (store.root / "summary.md").write_text(table + "\n")
+    plot_success_vs_time(summary, store.root / "summary.png")
+    if rows:
+        first = min(rows, key=lambda r: (r["task"], r["seed"]))
+        plot_episode(first, maze_geometry(cfg.env.name), store.root / cfg.method.name / cfg.env.name / "episode.png")
     print(table)
     print(f"{len(rows)} episodes in {store.root}; wall time {time.time() - t0:.1f}s")
     return 0

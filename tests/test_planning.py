@@ -96,6 +96,8 @@ def test_eval_job_writes_rows_and_resumes(tiny_checkpoint, tmp_path):
     assert [f.stat().st_mtime_ns for f in files] == mtimes
     assert len(list(tmp_path.glob("t/p-mctd/pointmaze-medium/task=*/seed=*.parquet"))) == 4
     assert "| p-mctd | pointmaze-medium | 4 |" in second.stdout
+    assert (tmp_path / "t/summary.png").stat().st_size > 0
+    assert (tmp_path / "t/p-mctd/pointmaze-medium/episode.png").stat().st_size > 0
 
 
 @pytest.mark.parametrize("extra, message", [

@@ -1,0 +1,74 @@
+"""Pictures people would rather look at than read: plans on the maze, success vs planning time."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from fmctd_dist.envs.maze import MAZE_UNIT, MazeGeometry  # noqa: E402
+
+
+def draw_maze(ax, geo: MazeGeometry) -> None:
+    """Walls as grey squares in world coordinates."""
+    for i, j in zip(*np.nonzero(geo.walls)):
+        x, y = geo.cell_to_xy((int(i), int(j)))
+        ax.add_patch(plt.Rectangle((x - MAZE_UNIT / 2, y - MAZE_UNIT / 2), MAZE_UNIT, MAZE_UNIT, color="0.75", lw=0))
+    rows, cols = geo.walls.shape
+    ax.set_xlim(-MAZE_UNIT * 1.5, (cols - 1.5) * MAZE_UNIT)
+    ax.set_ylim(-MAZE_UNIT * 1.5, (rows - 1.5) * MAZE_UNIT)
+    ax.set_aspect("equal")
+    ax.set_xticks([])
+    ax.set_yticks([])
+
+
+def plot_episode(row: dict[str, Any], geo: MazeGeometry, path: Path) -> Path:
+    """The first plan (dashed) and the executed trajectory (solid) of one episode."""
+    fig, ax = plt.subplots(figsize=(5, 5 * geo.walls.shape[0] / geo.walls.shape[1]))
+    draw_maze(ax, geo)
+    plan = np.asarray(row["plan_xy"]).reshape(-1, 2)
+    traj = np.asarray(row["traj_xy"]).reshape(-1, 2)
+    task = geo.task(row["task"])
+    ax.plot(plan[:, 0], plan[:, 1], "--", color="tab:blue", lw=1.2, label="plan")
+    ax.plot(traj[:, 0], traj[:, 1], "-", color="tab:orange", lw=1.5, label="executed")
+    ax.plot(*traj[0], "o", color="tab:green", ms=8, label="start")
+    ax.plot(*task.goal_xy, "*", color="tab:red", ms=14, label="goal")
+    outcome = "success" if row["success"] else "failure"
+    ax.set_title(f"{row['method']} {row['env']} task {row['task']} seed {row['seed']}: {outcome}, "
+                 f"{row['plan_time_s']:.1f}s planning", fontsize=8)
+    ax.legend(loc="lower right", fontsize=7)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def plot_success_vs_time(summary: list[dict[str, Any]], path: Path) -> Path:
+    """The paper's Figure 1 style: one point per (method, env), error bars over seeds."""
+    fig, ax = plt.subplots(figsize=(6, 4))
+    envs = sorted({s["env"] for s in summary})
+    markers = dict(zip(envs, "osD^v"))
+    for s in summary:
+        ax.errorbar(s["plan_time_s"], s["success"], xerr=s["plan_time_std"], yerr=s["success_std"],
+                    marker=markers[s["env"]], capsize=3, ls="none")
+        ax.annotate(f"{s['method']}", (s["plan_time_s"], s["success"]), fontsize=7, xytext=(4, 4),
+                    textcoords="offset points")
+    for env in envs:
+        ax.plot([], [], markers[env], color="k", label=env)
+    ax.set_xscale("log")
+    ax.set_xlabel("planning time per episode (s, log)")
+    ax.set_ylabel("success (%)")
+    ax.set_ylim(-5, 105)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
