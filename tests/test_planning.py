@@ -117,3 +117,14 @@ def test_eval_job_bad_input_is_one_clear_error(tiny_checkpoint, tmp_path, extra,
 def test_eval_job_missing_checkpoint(tmp_path):
     out = run_eval([f"checkpoint={tmp_path}/nothing", f"eval.out={tmp_path}"])
     assert out.returncode == 2 and "checkpoint" in out.stderr and "train.py" in out.stderr
+
+
+def test_bench_speed_prints_side_by_side_ratios(tiny_checkpoint):
+    args, _ = tiny_checkpoint
+    out = subprocess.run([sys.executable, "jobs/bench_speed.py", "methods=[mctd,p-mctd]", *args, "tasks=[3]",
+                          "seeds=[0]", "method.budget=6", "method.warp_threshold=1000"],
+                         cwd=REPO_ROOT, capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr
+    assert "| method | success (%) | planning time (s) | time / p-mctd |" in out.stdout
+    lines = [line for line in out.stdout.splitlines() if line.startswith("| mctd |") or line.startswith("| p-mctd |")]
+    assert len(lines) == 2 and "| 1.0x |" in lines[1]

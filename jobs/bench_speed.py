@@ -1,0 +1,79 @@
+"""Side-by-side planning speed: several methods on the same episodes, in one run.
+
+    python jobs/bench_speed.py env=pointmaze-medium tasks=[1,2,3,4,5] seeds=[0,1]
+    python jobs/bench_speed.py env=pointmaze-giant methods=[mctd,fast-mctd] eval.episode_time_limit=600
+
+For each method (default: mctd, p-mctd, s-mctd, fast-mctd) every episode is run in this
+process with a LocalDenoiser on that method's checkpoint, interleaved per episode so load
+on the machine hits all methods alike. Prints success, mean planning time, the share of
+planning time inside the denoiser, and planning-time ratios against Fast-MCTD — ratios, not
+seconds, are what compare across machines (the paper: MCTD / Fast-MCTD = 264.2 / 2.4 =
+110x on PointMaze-giant).
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+
+import numpy as np
+import torch
+
+from fmctd_dist.config import load_config
+from fmctd_dist.denoiser.local import LocalDenoiser
+from fmctd_dist.diffusion.checkpoint import load_checkpoint, normaliser_from_manifest
+from fmctd_dist.envs import make_env
+from fmctd_dist.errors import FmctdError
+from fmctd_dist.evaluation.episode import describe, run_episode
+from fmctd_dist.planners import make_planner
+
+DEFAULT_METHODS = ["mctd", "p-mctd", "s-mctd", "fast-mctd"]
+
+
+def build(method: str, overrides: list[str]):
+    cfg = load_config(overrides + [f"method={method}"])
+    model, manifest = load_checkpoint(cfg.checkpoint_dir(), cfg)
+    denoiser = LocalDenoiser(model, cfg.diffusion, cfg.device, cfg.ray.micro_batch, manifest["digest"])
+    return cfg, make_planner(cfg, denoiser, normaliser_from_manifest(manifest), cfg.eval.episode_time_limit)
+
+
+def main(argv: list[str]) -> int:
+    methods = DEFAULT_METHODS
+    rest = []
+    for a in argv:
+        if a.startswith("methods="):
+            methods = [m.strip() for m in a.split("=", 1)[1].strip("[]").split(",") if m.strip()]
+        else:
+            rest.append(a)
+    setups = {m: build(m, rest) for m in methods}  # every config and checkpoint checked up front
+    cfg0 = next(iter(setups.values()))[0]
+    env = make_env(cfg0.env.name, cfg0.env.protocol)
+    rows: dict[str, list[dict]] = {m: [] for m in methods}
+    t0 = time.time()
+    for task in cfg0.eval.tasks:
+        for seed in cfg0.eval.seeds:
+            for m, (cfg, planner) in setups.items():
+                row = run_episode(cfg, env, planner, task, seed)
+                rows[m].append(row)
+                print(describe(row), flush=True)
+    ref = "fast-mctd" if "fast-mctd" in rows else methods[-1]
+    ref_time = np.mean([r["plan_time_s"] for r in rows[ref]])
+    print(f"\n{cfg0.env.name}, tasks {cfg0.eval.tasks} x seeds {cfg0.eval.seeds}, torch threads "
+          f"{torch.get_num_threads()}, {time.time() - t0:.0f}s total\n")
+    print(f"| method | success (%) | planning time (s) | time / {ref} | in denoiser | expansions | iterations |")
+    print("|---|---|---|---|---|---|---|")
+    for m, rs in rows.items():
+        t = np.array([r["plan_time_s"] for r in rs])
+        share = np.sum([r["denoise_time_s"] for r in rs]) / max(t.sum(), 1e-12)
+        print(f"| {m} | {100 * np.mean([r['success'] for r in rs]):.0f} | {t.mean():.2f} ± {t.std():.2f} | "
+              f"{t.mean() / ref_time:.1f}x | {100 * share:.1f}% | {np.mean([r['expansions'] for r in rs]):.0f} | "
+              f"{np.mean([r['iterations'] for r in rs]):.1f} |")
+    return 0
+
+
+if __name__ == "__main__":
+    try:
+        sys.exit(main(sys.argv[1:]))
+    except FmctdError as e:
+        print(f"error: {e}", file=sys.stderr)
+        sys.exit(2)
