@@ -2,6 +2,10 @@
 
     python jobs/train.py env=pointmaze-medium jump=5 train.max_steps=200        # smoke run -> runs/
     python jobs/train.py env=pointmaze-medium jump=5 train.out=checkpoints/pointmaze-medium-h5
+    python jobs/train.py env=pointmaze-medium model.kind=diffuser    # Diffuser U-Net -> runs/pointmaze-medium-diffuser
+
+model.kind=diffuser without a method= word trains with configs/method/diffuser.yaml (its
+lr, batch, EMA, cosine betas, frame_stack 1 are the Diffuser defaults).
 
 The dataset is generated first if it is missing (and verified if it exists). A killed run
 continues from its last checkpoint when rerun with the same command; raising
@@ -20,11 +24,12 @@ from fmctd_dist.errors import FmctdError
 
 
 def main(argv: list[str]) -> int:
-    cfg = load_config(argv, method="mctd")  # dense (jump=1) unless jump=... is given
+    method = "diffuser" if "model.kind=diffuser" in [a.replace(" ", "") for a in argv] else "mctd"
+    cfg = load_config(argv, method=method)  # dense (jump=1) unless jump=... is given
     resolve_device(cfg.device)  # a missing GPU fails here, before any work
     make_dataset(cfg)
     data = train_data(cfg, load_dataset(cfg))
-    out = resolve_path(cfg.train.out or f"runs/{cfg.env.name}-h{cfg.jump}")
+    out = resolve_path(cfg.train.out or f"runs/{cfg.run_name}")
     t0 = time.time()
     summary = train(cfg, data, out)
     print(f"checkpoint {out}: step {summary['step']}, {summary['param_count']:,} parameters, "

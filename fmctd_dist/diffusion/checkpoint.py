@@ -22,6 +22,7 @@ from torch import nn
 from fmctd_dist.config import Config, ModelConfig
 from fmctd_dist.data.tokens import Normaliser
 from fmctd_dist.diffusion.model import DFTransformer
+from fmctd_dist.diffusion.models import build_model, model_config_from_dict
 from fmctd_dist.errors import CheckpointError
 
 MODEL_FILE = "model.pt"
@@ -29,6 +30,11 @@ MANIFEST_FILE = "manifest.json"
 TRAIN_STATE_FILE = "train_state.pt"
 FORMAT_VERSION = 1
 MODEL_FIELDS = ("kind", "frame_stack", "width", "layers", "heads", "ff")
+UNET_FIELDS = ("unet_channels", "unet_kernel")  # also checked when model.kind=diffuser
+
+
+def _model_fields(cfg: Config) -> tuple[str, ...]:
+    return MODEL_FIELDS + (UNET_FIELDS if cfg.model.kind == "diffuser" else ())
 
 
 def sha256_file(path: str | Path) -> str:
@@ -92,7 +98,7 @@ def _train_fix(cfg: Config | None) -> str:
     if cfg is None:
         return "train one with `python jobs/train.py env=<env> jump=<H>`"
     default = ModelConfig()
-    extra = "".join(f" model.{f}={getattr(cfg.model, f)}" for f in MODEL_FIELDS
+    extra = "".join(f" model.{f}={str(getattr(cfg.model, f)).replace(' ', '')}" for f in _model_fields(cfg)
                     if getattr(cfg.model, f) != getattr(default, f))
     return f"train one with `python jobs/train.py env={cfg.env.name} jump={cfg.jump}{extra}`"
 
@@ -114,7 +120,7 @@ def check_compatible(manifest: dict[str, Any], cfg: Config, where: str | Path) -
     """Raise one CheckpointError naming the first field where checkpoint and config disagree."""
     saved = manifest.get("config", {})
     pairs = [("env.name", saved.get("env", {}).get("name"), cfg.env.name), ("jump", saved.get("jump"), cfg.jump)]
-    pairs += [(f"model.{f}", saved.get("model", {}).get(f), getattr(cfg.model, f)) for f in MODEL_FIELDS]
+    pairs += [(f"model.{f}", saved.get("model", {}).get(f), getattr(cfg.model, f)) for f in _model_fields(cfg)]
     pairs += [("n_tokens", manifest.get("n_tokens"), cfg.n_tokens)]
     for name, have, want in pairs:
         if have != want:
@@ -158,10 +164,9 @@ def load_checkpoint(ckpt_dir: str | Path, cfg: Config | None = None,
 
 
 def model_from_manifest(manifest: dict[str, Any]) -> DFTransformer:
-    """An untrained model of the architecture a manifest describes."""
-    m = manifest["config"]["model"]
-    return DFTransformer(manifest["token_dim"], manifest["n_tokens"], m["width"], m["layers"], m["heads"],
-                         m["ff"], m["kind"])
+    """An untrained model of the architecture a manifest describes (any model.kind)."""
+    return build_model(model_config_from_dict(manifest["config"]["model"]), manifest["n_tokens"],
+                       manifest["token_dim"])
 
 
 def normaliser_from_manifest(manifest: dict[str, Any]) -> Normaliser:

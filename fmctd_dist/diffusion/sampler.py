@@ -18,7 +18,7 @@ import torch
 from torch import nn
 
 from fmctd_dist.config import DiffusionConfig
-from fmctd_dist.diffusion.schedule import alphas_cumprod, level_timesteps, linear_betas
+from fmctd_dist.diffusion.schedule import alphas_cumprod, level_timesteps, make_betas
 
 GUIDANCE_GAIN = 1000.0 / 16.0  # authors: x1000 x batch/16, then a batch mean -> 62.5 per sample
 START_WEIGHT = 20.0  # context frames pulled toward the start ("reconstruction guidance")
@@ -51,8 +51,8 @@ class SamplerConsts:
 
 
 def make_consts(cfg: DiffusionConfig, device: torch.device | str = "cpu") -> SamplerConsts:
-    """Tables from the linear beta schedule (float64 math, stored float32 like the authors')."""
-    ab = alphas_cumprod(linear_betas(cfg.timesteps, cfg.beta_start, cfg.beta_end))  # [timesteps]
+    """Tables from cfg's beta schedule (float64 math, stored float32 like the authors')."""
+    ab = alphas_cumprod(make_betas(cfg.beta_schedule, cfg.timesteps, cfg.beta_start, cfg.beta_end))  # [timesteps]
     lt = level_timesteps(cfg.levels, cfg.timesteps)  # [levels+1], lt[0] = -1
     stab = cfg.stabilization - 1
     t_in = np.where(lt < 0, stab, lt)

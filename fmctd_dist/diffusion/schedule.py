@@ -18,6 +18,30 @@ def linear_betas(timesteps: int = 1000, start: float = 1e-4, end: float = 0.02) 
     return np.linspace(start, end, timesteps, dtype=np.float64)
 
 
+def cosine_betas(timesteps: int = 100, s: float = 0.008, max_beta: float = 0.999) -> np.ndarray:
+    """[timesteps] float64 cosine schedule (Nichol & Dhariwal 2021), as in Diffuser.
+
+    alphabar(t) = f(t) / f(0), f(t) = cos(((t / T + s) / (1 + s)) * pi / 2)^2, and
+    beta_t = 1 - alphabar(t) / alphabar(t - 1) for t = 1..T, clipped to ``max_beta``.
+    """
+    t = np.arange(timesteps + 1, dtype=np.float64) / timesteps
+    f = np.cos((t + s) / (1 + s) * np.pi / 2) ** 2
+    ab = f / f[0]
+    return np.clip(1.0 - ab[1:] / ab[:-1], 0.0, max_beta)
+
+
+BETA_SCHEDULES = ("linear", "cosine")
+
+
+def make_betas(schedule: str, timesteps: int, start: float = 1e-4, end: float = 0.02) -> np.ndarray:
+    """[timesteps] float64 betas of the named schedule; ``start``/``end`` only apply to linear."""
+    if schedule == "linear":
+        return linear_betas(timesteps, start, end)
+    if schedule == "cosine":
+        return cosine_betas(timesteps)
+    raise ValueError(f"unknown beta schedule {schedule!r}; expected one of {BETA_SCHEDULES}")
+
+
 def alphas_cumprod(betas: np.ndarray) -> np.ndarray:
     """[timesteps] float64 cumulative product of (1 - beta)."""
     return np.cumprod(1.0 - betas)

@@ -26,7 +26,8 @@ from fmctd_dist.diffusion.checkpoint import (
     check_compatible, load_checkpoint, load_train_state, module_state, save_checkpoint, save_train_state,
 )
 from fmctd_dist.diffusion.model import DFTransformer
-from fmctd_dist.diffusion.schedule import alphas_cumprod, linear_betas
+from fmctd_dist.diffusion.models import build_model
+from fmctd_dist.diffusion.schedule import alphas_cumprod, make_betas
 from fmctd_dist.errors import CheckpointError, DatasetError
 
 CONTEXT_T_MAX = 250  # with prob. 0.5 the context token's timestep is resampled in [0, 250)
@@ -60,7 +61,8 @@ class DFLoss(torch.nn.Module):
 
     def __init__(self, cfg: Config, device: torch.device):
         super().__init__()
-        ab = alphas_cumprod(linear_betas(cfg.diffusion.timesteps, cfg.diffusion.beta_start, cfg.diffusion.beta_end))
+        dc = cfg.diffusion
+        ab = alphas_cumprod(make_betas(dc.beta_schedule, dc.timesteps, dc.beta_start, dc.beta_end))
         snr = ab / (1.0 - ab)
         self.register_buffer("sqrt_ab", torch.as_tensor(np.sqrt(ab), dtype=torch.float32, device=device))
         self.register_buffer("sqrt_1m_ab", torch.as_tensor(np.sqrt(1.0 - ab), dtype=torch.float32, device=device))
@@ -86,6 +88,41 @@ class DFLoss(torch.nn.Module):
         return (weight[..., None] * err).mean()
 
 
+class DiffuserLoss(torch.nn.Module):
+    """Diffuser loss (Janner et al.): one uniform timestep per sample, start token clean, plain x0 MSE.
+
+    The start token is fed exactly as the sampler feeds a level-0 token (timestep
+    stabilization-1, scaled by its sqrt(alphabar), no noise) and is left out of the loss:
+    at planning time it is inpainted, never predicted. No length randomisation.
+    """
+
+    def __init__(self, cfg: Config, device: torch.device):
+        super().__init__()
+        dc = cfg.diffusion
+        ab = alphas_cumprod(make_betas(dc.beta_schedule, dc.timesteps, dc.beta_start, dc.beta_end))
+        self.register_buffer("sqrt_ab", torch.as_tensor(np.sqrt(ab), dtype=torch.float32, device=device))
+        self.register_buffer("sqrt_1m_ab", torch.as_tensor(np.sqrt(1.0 - ab), dtype=torch.float32, device=device))
+        self.timesteps = dc.timesteps
+        self.t_start = dc.stabilization - 1  # the sampler's network timestep for a clean (level-0) token
+        self.clip_noise = dc.clip_noise
+
+    def forward(self, model: torch.nn.Module, x0: torch.Tensor, gen: torch.Generator) -> torch.Tensor:
+        """x0: [B, T, D] clean normalised tokens (token 0 = start) -> scalar loss; randomness from ``gen``."""
+        b, t, _ = x0.shape
+        dev = x0.device
+        k = torch.randint(0, self.timesteps, (b, 1), generator=gen, device=dev).expand(b, t - 1)
+        k = torch.cat((torch.full((b, 1), self.t_start, dtype=k.dtype, device=dev), k), dim=1)  # [B, T]
+        noise = torch.randn(x0.shape, generator=gen, device=dev).clamp(-self.clip_noise, self.clip_noise)
+        xt = self.sqrt_ab[k][..., None] * x0 + self.sqrt_1m_ab[k][..., None] * noise
+        xt = torch.cat((self.sqrt_ab[self.t_start] * x0[:, :1], xt[:, 1:]), dim=1)
+        return (model(xt, k)[:, 1:] - x0[:, 1:]).square().mean()
+
+
+def make_loss(cfg: Config, device: torch.device) -> torch.nn.Module:
+    """The training loss of ``cfg.model.kind`` (df: DFLoss, diffuser: DiffuserLoss)."""
+    return DiffuserLoss(cfg, device) if cfg.model.kind == "diffuser" else DFLoss(cfg, device)
+
+
 def lr_at(cfg: Config, step: int) -> float:
     """Linear warm-up over train.warmup steps, then constant."""
     w = cfg.train.warmup
@@ -104,7 +141,7 @@ def validation_loss(model: DFTransformer, loss_fn: DFLoss, batches: list[torch.T
 
 
 def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool = True) -> dict[str, Any]:
-    """Train (or resume) a DFTransformer into out_dir; returns the summary written to the manifest."""
+    """Train (or resume) the cfg.model.kind model into out_dir; returns the summary written to the manifest."""
     device = resolve_device(cfg.device)
     if cfg.train.threads > 0:
         torch.set_num_threads(cfg.train.threads)
@@ -113,9 +150,9 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
 
     with torch.random.fork_rng(devices=[]):  # seeded init without touching the caller's global RNG
         torch.manual_seed(tc.seed)
-        model = DFTransformer.from_config(cfg.model, cfg.n_tokens).to(device)
+        model = build_model(cfg.model, cfg.n_tokens).to(device)
     opt = torch.optim.AdamW(model.parameters(), lr=tc.lr, betas=(0.9, 0.999), weight_decay=tc.weight_decay)
-    loss_fn = DFLoss(cfg, device)
+    loss_fn = make_loss(cfg, device)
     rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence([tc.seed, data.seed])))
     gen = torch.Generator(device=device).manual_seed(tc.seed)
     step, wall, history, resumed_from = 0, 0.0, {"val": [], "train": []}, None

@@ -17,4 +17,8 @@ def make_planner(cfg: Config, denoiser: Denoiser, normaliser: Normaliser, time_l
         from fmctd_dist.planners.diffusion_forcing import DiffusionForcingPlanner
 
         return DiffusionForcingPlanner(cfg, denoiser, normaliser)
-    raise unknown_name("method.planner", cfg.method.planner, ["mctd", "diffusion_forcing"])
+    if cfg.method.planner == "diffuser":
+        from fmctd_dist.planners.diffuser import DiffuserPlanner
+
+        return DiffuserPlanner(cfg, denoiser, normaliser)
+    raise unknown_name("method.planner", cfg.method.planner, ["mctd", "diffusion_forcing", "diffuser"])

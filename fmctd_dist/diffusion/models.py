@@ -1,0 +1,38 @@
+"""model.kind -> network: the one place that knows which architectures exist.
+
+Every model maps (x [B, T, D], t [B, T] long) -> x0_hat [B, T, D] and carries ``kind``,
+``token_dim``, ``n_tokens`` and ``num_params()``, so the sampler, training loop, checkpoints
+and denoisers never branch on the architecture.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+from torch import nn
+
+from fmctd_dist.config import MODEL_KINDS, ModelConfig
+from fmctd_dist.diffusion.model import DFTransformer
+from fmctd_dist.diffusion.unet import TemporalUnet
+from fmctd_dist.errors import unknown_name
+
+
+def build_model(model_cfg: ModelConfig, n_tokens: int, token_dim: int | None = None) -> nn.Module:
+    """An untrained model for ``cfg.model`` and a sequence of ``n_tokens`` tokens.
+
+    token_dim defaults to 2 * frame_stack (one (x, y) per stacked frame).
+    """
+    dim = 2 * model_cfg.frame_stack if token_dim is None else token_dim
+    if model_cfg.kind == "df":
+        return DFTransformer(dim, n_tokens, model_cfg.width, model_cfg.layers, model_cfg.heads, model_cfg.ff,
+                             model_cfg.kind)
+    if model_cfg.kind == "diffuser":
+        return TemporalUnet(dim, n_tokens, list(model_cfg.unet_channels), model_cfg.unet_kernel, model_cfg.kind)
+    raise unknown_name("model.kind", model_cfg.kind, MODEL_KINDS)
+
+
+def model_config_from_dict(d: dict[str, Any]) -> ModelConfig:
+    """ModelConfig from a manifest's ``config.model`` (older manifests lack the U-Net fields)."""
+    names = {f.name for f in dataclasses.fields(ModelConfig)}
+    return ModelConfig(**{k: v for k, v in d.items() if k in names})
