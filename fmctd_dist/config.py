@@ -139,6 +139,7 @@ class RayConfig:
     num_gpus: float = 0.0  # per denoiser actor
     num_cpus: float = 1.0  # per denoiser actor
     call_timeout_s: float = 300.0  # a micro-batch slower than this is re-routed
+    max_restarts: int = 3  # per denoiser actor; 0 = a dead actor stays dead (its work is re-routed)
 
 
 @dataclass
@@ -323,9 +324,10 @@ def validate(cfg: Config) -> None:
               "data.episode_steps", "data.train_window", "train.max_steps", "train.batch_size",
               "train.ckpt_every", "method.parallel", "method.budget", "method.segment_transitions",
               "method.sim_skip", "ray.denoiser_actors", "ray.env_actors", "ray.micro_batch",
-              "diffusion.levels", "diffusion.timesteps")
+              "ray.call_timeout_s", "diffusion.levels", "diffusion.timesteps")
     _non_negative(cfg, "data.seed", "train.seed", "seed", "method.virtual_weight", "data.noise",
-                  "method.replan_every", "eval.episode_time_limit", "ray.num_gpus")
+                  "method.replan_every", "eval.episode_time_limit", "ray.num_gpus",
+                  "ray.max_restarts")
     step = cfg.jump * cfg.model.frame_stack
     if cfg.env.horizon % step:
         raise ConfigError(

@@ -54,3 +54,26 @@ def tiny_args(data_root, ckpt) -> list[str]:
     """Overrides that describe the tiny dataset + tiny checkpoint (for jobs run as subprocesses)."""
     return TINY_DATA + TINY_MODEL + [f"data.root={data_root}", f"checkpoint={ckpt}", "env.max_steps=100",
                                      "jump=1"]
+
+
+@pytest.fixture(scope="session")
+def ray_cluster():
+    """ONE local Ray cluster for every ``@pytest.mark.ray`` test (2 logical CPUs, no dashboard).
+
+    Token auth is off for this private test cluster (RAY_AUTH_MODE=disabled), so a stale
+    ~/.ray/auth_token from another run cannot break it. Yields the cluster's address, which
+    subprocess tests pass on as RAY_ADDRESS.
+    """
+    import logging
+
+    import ray
+
+    before = os.environ.get("RAY_AUTH_MODE")
+    os.environ["RAY_AUTH_MODE"] = "disabled"
+    ray.init(num_cpus=2, include_dashboard=False, logging_level=logging.ERROR, log_to_driver=False)
+    yield ray.get_runtime_context().gcs_address
+    ray.shutdown()
+    if before is None:
+        os.environ.pop("RAY_AUTH_MODE", None)
+    else:
+        os.environ["RAY_AUTH_MODE"] = before

@@ -15,7 +15,7 @@ import numpy as np
 import torch
 
 from fmctd_dist.config import Config, DiffusionConfig
-from fmctd_dist.denoiser.protocol import DenoiseBatch, DenoiseResult
+from fmctd_dist.denoiser.protocol import DenoiseBatch, DenoiseResult, micro_batch_indices
 from fmctd_dist.device import resolve_device
 from fmctd_dist.diffusion.model import DFTransformer
 from fmctd_dist.diffusion.sampler import make_consts, run_levels
@@ -51,11 +51,9 @@ class LocalDenoiser:
         self._check(batch)
         b, m = batch.size, self.micro_batch
         xs, x0s, seconds, calls, padded = [], [], 0.0, {}, 0
-        for lo in range(0, b, m):
-            idx = np.arange(lo, min(lo + m, b))
-            pad = m - len(idx)
+        for lo, idx in zip(range(0, b, m), micro_batch_indices(b, m)):
+            pad = lo + m - min(lo + m, b)
             padded += pad
-            idx = np.concatenate([idx, np.full(pad, idx[-1])])
             x, x0, dt = self._run(batch.take(idx), calls)
             xs.append(x[: m - pad])
             x0s.append(x0[: m - pad])

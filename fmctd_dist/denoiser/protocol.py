@@ -82,6 +82,17 @@ def concat_batches(batches: list[DenoiseBatch]) -> DenoiseBatch:
     )
 
 
+def micro_batch_indices(size: int, micro_batch: int) -> list[np.ndarray]:
+    """Job indices of each micro-batch: cut in job order into exactly ``micro_batch`` jobs, the
+    last one padded with copies of its last job. Every denoiser (local or Ray) cuts this way, so
+    all model calls have the same shapes and a job's bits do not depend on who ran it (design §4)."""
+    out = []
+    for lo in range(0, size, micro_batch):
+        idx = np.arange(lo, min(lo + micro_batch, size))
+        out.append(np.concatenate([idx, np.full(micro_batch - len(idx), idx[-1])]))
+    return out
+
+
 def pad_levels(levels: np.ndarray, rows: int) -> np.ndarray:
     """Pad [B, R+1, T] to [B, rows, T] by repeating the last row (no-op transitions)."""
     have = levels.shape[1]

@@ -1,0 +1,267 @@
+"""RayDenoiser: the Denoiser protocol over a pool of ``DenoiserActor``s (design §3-6).
+
+A batch is cut in job order into micro-batches of exactly M = ``ray.micro_batch`` jobs (the
+last one padded, :func:`micro_batch_indices`, the same cut as :class:`LocalDenoiser`), so
+every model call has the same shapes with 1 actor, N actors or no Ray, and plans are bitwise
+equal on CPU. Micro-batches are sharded least-loaded over the actors and gathered with
+``ray.wait``; a micro-batch whose actor died or timed out is re-run on another live actor
+(denoise jobs are idempotent) and counted in ``DenoiseResult.retries``. When no live actor
+is left, one :class:`DeviceError` is raised -- never a hang.
+
+    pool = DenoiserPool.create(prepared, n=2)      # actors load the checkpoint (digest-checked)
+    planner = make_planner(cfg, pool.denoiser(), normaliser)
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import ray
+from ray.exceptions import GetTimeoutError, RayActorError, RayTaskError
+
+from fmctd_dist.config import Config, config_from_dict
+from fmctd_dist.denoiser.protocol import DenoiseBatch, DenoiseResult, micro_batch_indices
+from fmctd_dist.errors import DeviceError, FmctdError
+
+__all__ = ["DenoiserActor", "RayDenoiser", "DenoiserPool", "unwrap_ray_error"]
+
+
+def unwrap_ray_error(e: BaseException) -> BaseException:
+    """The FmctdError a remote call raised (so users read our message, not a RayTaskError)."""
+    if isinstance(e, RayTaskError):
+        cause = getattr(e, "cause", None)
+        if isinstance(cause, FmctdError):
+            return cause
+        if isinstance(cause, BaseException):
+            return unwrap_ray_error(cause)
+    return e
+
+
+@ray.remote
+class DenoiserActor:
+    """One LocalDenoiser in its own process (one GPU each when ``ray.num_gpus`` = 1).
+
+    The constructor never raises: a bad checkpoint or a missing GPU is kept and raised by
+    :meth:`info` and :meth:`denoise`, because Ray drops the exception of a failed actor
+    constructor and the user would read "actor died" instead of our message.
+    """
+
+    def __init__(self, checkpoint: str, digest: str, cfg_dict: dict, device: str):
+        import torch
+
+        from fmctd_dist.denoiser.local import LocalDenoiser
+
+        cfg = config_from_dict(cfg_dict)
+        torch.set_num_threads(max(1, int(cfg.ray.num_cpus)))
+        self._info: dict[str, Any] = {"gpu_ids": [str(g) for g in ray.get_gpu_ids()],
+                                      "cuda_device_count": torch.cuda.device_count(),
+                                      "torch_threads": torch.get_num_threads(), "requested_device": device}
+        self._error: FmctdError | None = None
+        self._denoiser = None
+        try:
+            if device.startswith("cuda") and (not ray.get_gpu_ids() or torch.cuda.device_count() == 0):
+                raise DeviceError(
+                    f"device={device!r} but denoiser actor sees no GPU (ray.get_gpu_ids()={ray.get_gpu_ids()}, "
+                    f"torch.cuda.device_count()={torch.cuda.device_count()}); give each actor a GPU with "
+                    "ray.num_gpus=1 on a cluster with GPUs, or set device=cpu"
+                )
+            self._denoiser = LocalDenoiser.from_checkpoint(checkpoint, cfg, device=device, expect_digest=digest)
+            self._info["device"] = str(self._denoiser.device)
+        except FmctdError as e:
+            self._error = e
+
+    def info(self) -> dict[str, Any]:
+        """What this actor sees: gpu_ids, cuda_device_count, device, torch_threads, pid, node."""
+        if self._error is not None:
+            raise self._error
+        import os
+
+        return {**self._info, "pid": os.getpid(), "node_id": ray.get_runtime_context().get_node_id()}
+
+    def denoise(self, batch: DenoiseBatch) -> DenoiseResult:
+        """Exactly one micro-batch of M jobs (the caller cut and padded it)."""
+        if self._error is not None:
+            raise self._error
+        return self._denoiser.denoise(batch)
+
+
+@dataclass
+class _Shard:
+    """One micro-batch in flight: which jobs it holds and where it was sent."""
+
+    index: int  # micro-batch number in job order
+    batch: DenoiseBatch  # exactly M jobs (already a copy)
+    keep: int  # real (unpadded) jobs
+    actor: int = -1
+    deadline: float = 0.0
+    tried: set = field(default_factory=set)
+
+
+class RayDenoiser:
+    """Denoiser protocol over actor handles; safe to share between threads (trees)."""
+
+    def __init__(self, actors: list, micro_batch: int, call_timeout_s: float = 300.0, max_restarts: int = 0):
+        if not actors:
+            raise DeviceError("RayDenoiser needs at least one denoiser actor; set ray.denoiser_actors >= 1")
+        if micro_batch < 1:
+            raise ValueError(f"micro_batch={micro_batch} must be >= 1")
+        self.actors = list(actors)
+        self.micro_batch = micro_batch
+        self.call_timeout_s = call_timeout_s
+        # an actor may fail this many times in a row (it restarts max_restarts times) before it counts as dead
+        self.max_failures = max_restarts + 1
+        self._lock = threading.Lock()
+        self._failures = [0] * len(actors)  # consecutive failures per actor
+        self._inflight = [0] * len(actors)
+        self._rr = 0
+        self._last_error = ""
+
+    @classmethod
+    def from_config(cls, actors: list, cfg: Config) -> "RayDenoiser":
+        return cls(actors, cfg.ray.micro_batch, cfg.ray.call_timeout_s, cfg.ray.max_restarts)
+
+    def live_actors(self) -> int:
+        with self._lock:
+            return sum(f < self.max_failures for f in self._failures)
+
+    def denoise(self, batch: DenoiseBatch) -> DenoiseResult:
+        """x_out, x0 [B, T, D]; bitwise equal to LocalDenoiser(micro_batch=M) on the same batch."""
+        b, m = batch.size, self.micro_batch
+        t, d = batch.x.shape[1:]
+        if b == 0:
+            empty = np.zeros((0, t, d), np.float32)
+            return DenoiseResult(empty, empty.copy(), stats={"micro_batches": 0, "actors": len(self.actors)})
+        shards = [_Shard(i, batch.take(idx), min(m, b - i * m)) for i, idx in enumerate(micro_batch_indices(b, m))]
+        xs: list[np.ndarray | None] = [None] * len(shards)
+        x0s: list[np.ndarray | None] = [None] * len(shards)
+        seconds, retries, used = 0.0, 0, set()
+        pending: dict[Any, _Shard] = {}
+        for s in shards:
+            pending[self._submit(s)] = s
+        while pending:
+            now = time.monotonic()
+            wait_s = max(0.0, min(s.deadline for s in pending.values()) - now)
+            ready, _ = ray.wait(list(pending), num_returns=1, timeout=wait_s)
+            if ready:
+                ref = ready[0]
+                s = pending.pop(ref)
+                try:
+                    res: DenoiseResult = ray.get(ref)
+                except (RayActorError, GetTimeoutError) as e:
+                    self._failed(s, e)
+                    retries += 1
+                    pending[self._submit(s)] = s
+                    continue
+                except RayTaskError as e:  # a real error in the job (bad levels, bad checkpoint): not a fault
+                    self._done(s.actor, ok=True)
+                    raise unwrap_ray_error(e) from None
+                self._done(s.actor, ok=True)
+                used.add(s.actor)
+                xs[s.index], x0s[s.index] = res.x[: s.keep], res.x0[: s.keep]
+                seconds += float(res.denoise_time_s)
+            now = time.monotonic()
+            for ref, s in list(pending.items()):
+                if s.deadline <= now:  # too slow: run it elsewhere, drop the late answer
+                    del pending[ref]
+                    try:
+                        ray.cancel(ref)
+                    except Exception:  # noqa: BLE001 - cancelling is best effort
+                        pass
+                    self._failed(s, TimeoutError(f"no answer within ray.call_timeout_s={self.call_timeout_s}"))
+                    retries += 1
+                    pending[self._submit(s)] = s
+        return DenoiseResult(
+            x=np.concatenate(xs), x0=np.concatenate(x0s), denoise_time_s=seconds, retries=retries,
+            stats={"micro_batches": len(shards), "padded_jobs": len(shards) * m - b, "actors_used": len(used)},
+        )
+
+    def _submit(self, s: _Shard) -> Any:
+        with self._lock:
+            live = [i for i, f in enumerate(self._failures) if f < self.max_failures]
+            if not live:
+                raise DeviceError(
+                    f"all {len(self.actors)} denoiser actors died (each failed {self.max_failures} time(s) in a "
+                    f"row); last error: {self._last_error}; check the actors' logs "
+                    "(`ray logs`), memory and ray.max_restarts"
+                )
+            n = len(self.actors)
+            # prefer actors that have not failed this shard, then healthy ones, then the least loaded
+            order = sorted(live, key=lambda i: (i in s.tried, self._failures[i] > 0, self._inflight[i],
+                                                (i - self._rr) % n))
+            a = order[0]
+            self._rr = (a + 1) % n
+            self._inflight[a] += 1
+        s.actor, s.deadline = a, time.monotonic() + self.call_timeout_s
+        s.tried.add(a)
+        return self.actors[a].denoise.remote(s.batch)
+
+    def _failed(self, s: _Shard, error: BaseException) -> None:
+        with self._lock:
+            self._inflight[s.actor] -= 1
+            self._failures[s.actor] += 1
+            self._last_error = f"{type(error).__name__}: {str(error).splitlines()[0] if str(error) else ''}"
+
+    def _done(self, actor: int, ok: bool) -> None:
+        with self._lock:
+            self._inflight[actor] -= 1
+            if ok:
+                self._failures[actor] = 0
+
+
+class DenoiserPool:
+    """The denoiser actors of one run; hands out :class:`RayDenoiser` views that share them.
+
+    Several trees (threads here, or PlannerDriver actors given :attr:`actors`) may use the
+    pool at once; each actor serves micro-batches from all of them in arrival order, and since
+    a micro-batch's bits do not depend on who else is queued, every tree gets the plan it
+    would get alone.
+    """
+
+    def __init__(self, actors: list, cfg: Config, infos: list[dict[str, Any]]):
+        self.actors = actors
+        self.cfg = cfg
+        self.infos = infos  # per actor: gpu_ids, cuda_device_count, device, pid, node_id
+
+    @classmethod
+    def create(cls, prepared, n: int | None = None, timeout_s: float = 300.0) -> "DenoiserPool":
+        """Start ``n`` (default ``ray.denoiser_actors``) actors and wait until each has loaded the model.
+
+        Raises the actors' own CheckpointError/DeviceError (not a RayTaskError).
+        """
+        cfg = prepared.cfg
+        n = cfg.ray.denoiser_actors if n is None else n
+        if n < 1:
+            raise DeviceError(f"ray.denoiser_actors={n} must be >= 1")
+        opts = {"num_cpus": cfg.ray.num_cpus, "num_gpus": cfg.ray.num_gpus,
+                "max_restarts": cfg.ray.max_restarts, "max_task_retries": 0}
+        # max_task_retries=0: RayDenoiser re-routes a failed micro-batch itself (to a live actor, counted)
+        actors = [DenoiserActor.options(**opts).remote(str(prepared.checkpoint), prepared.checkpoint_digest,
+                                                       cfg.to_dict(), prepared.device) for _ in range(n)]
+        pool = cls(actors, cfg, [])
+        try:
+            pool.infos = ray.get([a.info.remote() for a in actors], timeout=timeout_s)
+        except RayTaskError as e:
+            pool.shutdown()
+            raise unwrap_ray_error(e) from None
+        except GetTimeoutError:
+            pool.shutdown()
+            raise DeviceError(
+                f"{n} denoiser actor(s) with num_cpus={cfg.ray.num_cpus}, num_gpus={cfg.ray.num_gpus} did not start "
+                f"within {timeout_s:.0f}s; the cluster has {ray.cluster_resources()} -- lower ray.denoiser_actors "
+                "or the per-actor resources"
+            ) from None
+        return pool
+
+    def denoiser(self) -> RayDenoiser:
+        return RayDenoiser.from_config(self.actors, self.cfg)
+
+    def shutdown(self) -> None:
+        for a in self.actors:
+            try:
+                ray.kill(a, no_restart=True)
+            except Exception:  # noqa: BLE001 - already gone
+                pass

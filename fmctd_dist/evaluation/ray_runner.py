@@ -1,0 +1,220 @@
+"""The evaluation grid on Ray (design §5): denoiser pool, one PlannerDriver per EnvActor.
+
+    job process: prepare() (all checks) -> ray.init -> DenoiserPool (N DenoiserActors)
+                 -> E EnvActors, each with its own PlannerDriver -> missing (task, seed) keys
+                 fanned out over the EnvActors -> each finished row written here, at once
+    EnvActor:    env + PD controller (run_episode); its planner is a proxy that asks the driver
+    PlannerDriver: owns the tree of each plan call (selection/backup are serial, here) and
+                 shards every expansion/simulation batch over the shared denoiser actors
+
+Only the job process writes files and draws progress bars; actors return rows and timings.
+Errors raised on purpose inside actors (FmctdError) reach the user as themselves.
+
+Python entry point (joins a running cluster, or ``ray.init()`` first yourself)::
+
+    import ray
+    ray.init()
+    from fmctd_dist.evaluation.ray_runner import evaluate
+    rows = evaluate(["method=fast-mctd", "tasks=[1]", "seeds=[0]"])
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import os
+from typing import Any, Callable
+
+import numpy as np
+import ray
+from ray.exceptions import RayActorError, RayTaskError
+from tqdm.auto import tqdm
+
+from fmctd_dist.config import Config, load_config
+from fmctd_dist.denoiser.ray_pool import DenoiserPool, RayDenoiser, unwrap_ray_error
+from fmctd_dist.errors import ConfigError, DeviceError
+from fmctd_dist.evaluation.episode import describe
+from fmctd_dist.evaluation.grid import Prepared, grid, prepare, provenance
+from fmctd_dist.evaluation.results import ResultStore
+from fmctd_dist.planners.base import PlanOutput
+
+__all__ = ["PlannerDriver", "EnvActor", "run_ray", "evaluate", "connect", "check_ray_config"]
+
+
+def _one_thread() -> None:
+    """Drivers and env actors do light serial work; leave the cores to the denoisers."""
+    try:
+        import torch
+
+        torch.set_num_threads(1)
+    except ImportError:  # pragma: no cover
+        pass
+
+
+@ray.remote(num_cpus=0)
+class PlannerDriver:
+    """Owns the search tree of each plan call; its denoiser is a RayDenoiser over the pool."""
+
+    def __init__(self, prepared: Prepared, actors: list):
+        from fmctd_dist.diffusion.checkpoint import normaliser_from_manifest, read_manifest
+        from fmctd_dist.planners import make_planner
+
+        _one_thread()
+        cfg = prepared.cfg
+        self.denoiser = RayDenoiser.from_config(actors, cfg)
+        normaliser = normaliser_from_manifest(read_manifest(prepared.checkpoint))
+        self.planner = make_planner(cfg, self.denoiser, normaliser, cfg.eval.episode_time_limit)
+
+    def plan(self, start: np.ndarray, goal: np.ndarray, seed: int) -> PlanOutput:
+        return self.planner.plan(np.array(start), np.array(goal), seed)
+
+    def last_tree(self):
+        """The SearchResult.tree of the last plan (tests compare payloads bitwise)."""
+        r = getattr(self.planner, "last_result", None)
+        return None if r is None else r.tree
+
+
+class _DriverPlanner:
+    """Planner protocol for run_episode: every plan() is one call to the episode's PlannerDriver."""
+
+    def __init__(self, driver):
+        self.driver = driver
+
+    def plan(self, start: np.ndarray, goal: np.ndarray, seed: int) -> PlanOutput:
+        try:
+            return ray.get(self.driver.plan.remote(np.array(start), np.array(goal), seed))
+        except RayTaskError as e:
+            raise unwrap_ray_error(e) from None
+
+
+@ray.remote(num_cpus=0)
+class EnvActor:
+    """Runs whole episodes (env + PD controller) and returns their rows; prints nothing."""
+
+    def __init__(self, prepared: Prepared, driver):
+        from fmctd_dist.envs import make_env
+
+        _one_thread()
+        self.cfg = prepared.cfg
+        self.env = make_env(self.cfg.env.name, self.cfg.env.protocol)
+        self.planner = _DriverPlanner(driver)
+
+    def run(self, task: int, seed: int) -> dict[str, Any]:
+        from fmctd_dist.evaluation.episode import run_episode
+
+        return run_episode(self.cfg, self.env, self.planner, task, seed)
+
+
+def check_ray_config(p: Prepared) -> None:
+    """Checks that need no cluster (run before ray.init)."""
+    r = p.cfg.ray
+    if p.device.startswith("cuda") and r.num_gpus <= 0:
+        raise DeviceError(f"device={p.cfg.device!r} (resolved {p.device}) but ray.num_gpus={r.num_gpus}: the denoiser "
+                          "actors would see no GPU; set ray.num_gpus=1 (one GPU per actor) or device=cpu")
+    if r.num_cpus < 0:
+        raise ConfigError(f"ray.num_cpus={r.num_cpus} must be >= 0")
+
+
+def check_cluster(p: Prepared) -> None:
+    """After ray.init, before any actor: the cluster must hold what the pool asks for."""
+    r = p.cfg.ray
+    res = ray.cluster_resources()
+    need_gpu = r.denoiser_actors * r.num_gpus
+    if need_gpu > res.get("GPU", 0.0):
+        raise DeviceError(f"{r.denoiser_actors} denoiser actor(s) x ray.num_gpus={r.num_gpus} need {need_gpu:g} GPU(s) "
+                          f"but the Ray cluster has {res.get('GPU', 0.0):g}; lower ray.denoiser_actors or add GPU nodes")
+    need_cpu = r.denoiser_actors * r.num_cpus
+    if need_cpu > res.get("CPU", 0.0):
+        raise DeviceError(f"{r.denoiser_actors} denoiser actor(s) x ray.num_cpus={r.num_cpus} need {need_cpu:g} CPU(s) "
+                          f"but the Ray cluster has {res.get('CPU', 0.0):g}; lower ray.denoiser_actors or ray.num_cpus")
+
+
+def connect(address: str = "") -> bool:
+    """Join ``address``, else a running cluster (RAY_ADDRESS / ``ray job submit`` / ``ray start``),
+    else start a local one. Returns True when this call started Ray (the caller shuts it down)."""
+    if ray.is_initialized():
+        return False
+    quiet = {"logging_level": logging.ERROR, "log_to_driver": False}
+    if address or os.environ.get("RAY_ADDRESS"):
+        ray.init(address=address or None, **quiet)
+        return False
+    try:
+        ray.init(address="auto", **quiet)
+        return False
+    except ConnectionError:
+        ray.init(include_dashboard=False, **quiet)
+        return True
+
+
+def run_ray(p: Prepared, store: ResultStore, progress: bool = True,
+            log: Callable[[str], None] = print) -> list[dict[str, Any]]:
+    """All missing episodes of the grid on Ray; rows written here as they finish."""
+    cfg = p.cfg
+    todo = [(t, s) for t, s in grid(cfg) if not store.has(cfg.method.name, cfg.env.name, t, s)]
+    if not todo:
+        return []
+    check_ray_config(p)
+    started = connect(cfg.ray.address)
+    actors: list = []
+    pool = None
+    try:
+        check_cluster(p)
+        pool = DenoiserPool.create(p, cfg.ray.denoiser_actors)
+        log(f"{len(pool.actors)} denoiser actor(s): " + "; ".join(
+            f"pid {i['pid']} device {i['device']} gpu_ids {i['gpu_ids']} cuda devices {i['cuda_device_count']}"
+            for i in pool.infos))
+        n_envs = min(cfg.ray.env_actors, len(todo))
+        drivers = [PlannerDriver.remote(p, pool.actors) for _ in range(n_envs)]
+        envs = [EnvActor.remote(p, d) for d in drivers]
+        actors = drivers + envs
+        rows: list[dict[str, Any]] = []
+        queue, free, pending = list(todo), list(envs), {}
+        bar = tqdm(total=len(todo), desc=f"{cfg.method.name} {cfg.env.name} (ray)", unit="ep", disable=not progress)
+        while queue or pending:
+            while queue and free:
+                env, key = free.pop(), queue.pop(0)
+                pending[env.run.remote(*key)] = (env, key)
+            ready, _ = ray.wait(list(pending), num_returns=1)
+            env, key = pending.pop(ready[0])
+            try:
+                row = ray.get(ready[0])
+            except RayTaskError as e:
+                raise unwrap_ray_error(e) from None
+            except RayActorError as e:
+                raise DeviceError(f"the env actor running task {key[0]} seed {key[1]} died: "
+                                  f"{str(e).splitlines()[0]}; rerun to resume (finished episodes are kept)") from None
+            row = {**row, **provenance(p, len(pool.actors))}
+            store.write(row)
+            rows.append(row)
+            free.append(env)
+            bar.update(1)
+            bar.set_postfix(success=f"{sum(r['success'] for r in rows)}/{len(rows)}")
+            (bar.write if progress else log)(describe(row))
+        bar.close()
+        return rows
+    finally:
+        for a in actors:
+            try:
+                ray.kill(a, no_restart=True)
+            except Exception:  # noqa: BLE001 - already gone
+                pass
+        if pool is not None:
+            pool.shutdown()
+        if started:
+            ray.shutdown()
+
+
+def evaluate(overrides: list[str] | Config, progress: bool = True) -> list[dict[str, Any]]:
+    """Evaluate on Ray and return one row per (task, seed) of the grid (resumed rows included).
+
+    ``overrides`` are the words of ``jobs/eval.py`` (``["method=fast-mctd", "tasks=[1]"]``) or a
+    Config; the runner is Ray whatever ``eval.runner`` says. Joins the cluster ``ray.init()``
+    made (or a running one), else starts a local one for this call.
+    """
+    cfg = overrides if isinstance(overrides, Config) else load_config(list(overrides))
+    cfg = dataclasses.replace(cfg, eval=dataclasses.replace(cfg.eval, runner="ray"))
+    p = prepare(cfg)
+    store = ResultStore(cfg.eval.out, cfg.eval.run)
+    run_ray(p, store, progress=progress)
+    keys = set(grid(cfg))
+    return [r for r in store.rows(cfg.method.name, cfg.env.name) if (r["task"], r["seed"]) in keys]

@@ -1,0 +1,135 @@
+"""Contract: a plan is the same bits from LocalDenoiser, 1 Ray actor, 2 Ray actors, and when
+two trees share the pool at once (design §4-5). CPU, tiny checkpoint, real model outputs."""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+import pytest
+import ray
+import torch
+
+from fmctd_dist.config import load_config
+from fmctd_dist.denoiser.local import LocalDenoiser
+from fmctd_dist.denoiser.protocol import DenoiseBatch, micro_batch_indices
+from fmctd_dist.denoiser.ray_pool import DenoiserPool
+from fmctd_dist.diffusion.checkpoint import normaliser_from_manifest, read_manifest
+from fmctd_dist.evaluation.grid import prepare
+from fmctd_dist.evaluation.ray_runner import PlannerDriver
+from fmctd_dist.planners import make_planner
+
+pytestmark = pytest.mark.ray
+
+SEARCH = ["method=p-mctd", "method.parallel=8", "method.budget=24", "method.early_stop=false",
+          "method.warp_threshold=1000", "ray.micro_batch=5"]  # M=5 cuts K=8 into a full and a padded batch
+START, GOAL = np.array([0.0, 0.0]), np.array([20.0, 20.0])
+
+
+@pytest.fixture(autouse=True)
+def one_thread():
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)
+
+
+@pytest.fixture(scope="module")
+def prepared(tiny_checkpoint):
+    args, _ = tiny_checkpoint
+    return prepare(load_config(args + SEARCH))
+
+
+@pytest.fixture(scope="module")
+def pools(prepared, ray_cluster):
+    """Pools of 1 and 2 actors (created once; the cluster has 2 logical CPUs, so one at a time)."""
+    made = {}
+
+    def get(n):
+        for k in [k for k in made if k != n]:
+            made.pop(k).shutdown()
+        if n not in made:
+            made[n] = DenoiserPool.create(prepared, n)
+        return made[n]
+
+    yield get
+    for pool in made.values():
+        pool.shutdown()
+
+
+def plan_with(prepared, denoiser, seed=7):
+    cfg = prepared.cfg
+    planner = make_planner(cfg, denoiser, normaliser_from_manifest(read_manifest(prepared.checkpoint)))
+    out = planner.plan(START, GOAL, seed)
+    return out, planner.last_result.tree
+
+
+def local_plan(prepared, seed=7):
+    den = LocalDenoiser.from_checkpoint(prepared.checkpoint, prepared.cfg, expect_digest=prepared.checkpoint_digest)
+    assert den.micro_batch == 5
+    return plan_with(prepared, den, seed)
+
+
+def assert_same(a, b):
+    (out_a, tree_a), (out_b, tree_b) = a, b
+    assert np.array_equal(out_a.waypoints, out_b.waypoints)
+    assert out_a.expansions == out_b.expansions and out_a.iterations == out_b.iterations
+    n = tree_a.num_nodes
+    assert n == tree_b.num_nodes and n > 1
+    assert np.array_equal(tree_a.x[:n], tree_b.x[:n])  # every node's denoised payload, bitwise
+
+
+def test_micro_batch_cut_is_job_order_and_padded():
+    cut = micro_batch_indices(12, 5)
+    assert [c.tolist() for c in cut] == [[0, 1, 2, 3, 4], [5, 6, 7, 8, 9], [10, 11, 11, 11, 11]]
+
+
+def test_ray_denoiser_matches_local_bitwise(prepared, pools):
+    cfg = prepared.cfg
+    local = LocalDenoiser.from_checkpoint(prepared.checkpoint, cfg)
+    rng = np.random.default_rng(0)
+    b, t, d = 13, cfg.n_tokens, cfg.token_dim
+    levels = np.repeat(np.linspace(50, 0, 4).astype(np.int64)[None, :, None], t, axis=2).repeat(b, axis=0)
+    levels[:, :, 0] = 0
+    batch = DenoiseBatch(rng.standard_normal((b, t, d), dtype=np.float32), levels, np.full(b, 0.5, np.float32),
+                         rng.standard_normal((b, 2), dtype=np.float32), rng.standard_normal((b, 2), dtype=np.float32))
+    want = local.denoise(batch)
+    got = pools(2).denoiser().denoise(batch)
+    assert np.array_equal(got.x, want.x) and np.array_equal(got.x0, want.x0)
+    assert got.retries == 0 and got.denoise_time_s > 0 and got.stats["micro_batches"] == 3
+
+
+def test_plan_identical_local_one_and_two_actors(prepared, pools):
+    ref = local_plan(prepared)
+    assert ref[0].status != "stay" and ref[0].expansions >= 24
+    pool = pools(1)
+    assert pool.infos[0]["device"] == "cpu" and pool.infos[0]["gpu_ids"] == []
+    assert_same(plan_with(prepared, pool.denoiser()), ref)
+    two = pools(2)
+    assert len({i["pid"] for i in two.infos}) == 2
+    assert_same(plan_with(prepared, two.denoiser()), ref)
+
+
+def test_two_trees_sharing_the_pool_at_once(prepared, pools):
+    refs = {s: local_plan(prepared, s) for s in (7, 8)}
+    pool = pools(2)
+    got: dict = {}
+
+    def tree(seed):  # each thread its own RayDenoiser view; both use the same two actors
+        got[seed] = plan_with(prepared, pool.denoiser(), seed)
+
+    threads = [threading.Thread(target=tree, args=(s,)) for s in (7, 8)]
+    for th in threads:
+        th.start()
+    for th in threads:
+        th.join(timeout=300)
+    for s in (7, 8):
+        assert_same(got[s], refs[s])
+    # and two PlannerDriver actors (the eval topology) planning concurrently
+    drivers = [PlannerDriver.remote(prepared, pool.actors) for _ in range(2)]
+    outs = ray.get([d.plan.remote(START, GOAL, s) for d, s in zip(drivers, (7, 8))])
+    trees = ray.get([d.last_tree.remote() for d in drivers])
+    for out, tr, s in zip(outs, trees, (7, 8)):
+        assert_same((out, tr), refs[s])
+    for d in drivers:
+        ray.kill(d)
