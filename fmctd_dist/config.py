@@ -122,7 +122,7 @@ class MethodConfig:
 
 @dataclass
 class EvalConfig:
-    runner: str = "local"  # local | ray
+    runner: str = "ray"  # ray (local cluster, or the running one) | local (no Ray, one process)
     tasks: list[int] = field(default_factory=lambda: [1, 2, 3, 4, 5])
     seeds: list[int] = field(default_factory=lambda: list(range(10)))
     out: str = "results"  # results root; rows go to <out>/<run>/<method>/<env>/...
