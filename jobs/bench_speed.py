@@ -13,17 +13,16 @@ seconds, are what compare across machines (the paper: MCTD / Fast-MCTD = 264.2 /
 
 from __future__ import annotations
 
-import sys
 import time
 
 import numpy as np
 import torch
 
+from fmctd_dist.cli import run
 from fmctd_dist.config import load_config
 from fmctd_dist.denoiser.local import LocalDenoiser
 from fmctd_dist.diffusion.checkpoint import load_checkpoint, normaliser_from_manifest
 from fmctd_dist.envs import make_env
-from fmctd_dist.errors import FmctdError
 from fmctd_dist.evaluation.episode import describe, run_episode
 from fmctd_dist.planners import make_planner
 
@@ -72,8 +71,4 @@ def main(argv: list[str]) -> int:
 
 
 if __name__ == "__main__":
-    try:
-        sys.exit(main(sys.argv[1:]))
-    except FmctdError as e:
-        print(f"error: {e}", file=sys.stderr)
-        sys.exit(2)
+    run(main)

@@ -10,12 +10,11 @@ and writes it to <eval.out>/<eval.run>/summary.md, with summary.png (success vs 
 time) and <method>/<env>/episode.png (the first episode's plan and trajectory on the maze).
 """
 
-import sys
 import time
 
+from fmctd_dist.cli import run
 from fmctd_dist.config import load_config
 from fmctd_dist.envs import maze_geometry
-from fmctd_dist.errors import FmctdError
 from fmctd_dist.evaluation.grid import prepare, run_local
 from fmctd_dist.evaluation.plots import plot_episode, plot_success_vs_time
 from fmctd_dist.evaluation.results import ResultStore, markdown_table, summarise
@@ -47,8 +46,4 @@ def main(argv: list[str]) -> int:
 
 
 if __name__ == "__main__":
-    try:
-        sys.exit(main(sys.argv[1:]))
-    except FmctdError as e:
-        print(f"error: {e}", file=sys.stderr)
-        sys.exit(2)
+    run(main)

@@ -6,12 +6,11 @@
 Nothing is downloaded. The same config always writes the same bytes (sha256 printed).
 """
 
-import sys
 import time
 
+from fmctd_dist.cli import run
 from fmctd_dist.config import load_config
 from fmctd_dist.data.dataset import make_dataset
-from fmctd_dist.errors import FmctdError
 
 
 def main(argv: list[str]) -> int:
@@ -27,8 +26,4 @@ def main(argv: list[str]) -> int:
 
 
 if __name__ == "__main__":
-    try:
-        sys.exit(main(sys.argv[1:]))
-    except FmctdError as e:
-        print(f"error: {e}", file=sys.stderr)
-        sys.exit(2)
+    run(main)

@@ -12,15 +12,14 @@ continues from its last checkpoint when rerun with the same command; raising
 train.max_steps continues a finished one.
 """
 
-import sys
 import time
 
+from fmctd_dist.cli import run
 from fmctd_dist.config import load_config, resolve_path
 from fmctd_dist.data.dataset import load_dataset, make_dataset
 from fmctd_dist.data.windows import train_data
 from fmctd_dist.device import resolve_device
 from fmctd_dist.diffusion.train import train
-from fmctd_dist.errors import FmctdError
 
 
 def main(argv: list[str]) -> int:
@@ -39,8 +38,4 @@ def main(argv: list[str]) -> int:
 
 
 if __name__ == "__main__":
-    try:
-        sys.exit(main(sys.argv[1:]))
-    except FmctdError as e:
-        print(f"error: {e}", file=sys.stderr)
-        sys.exit(2)
+    run(main)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 
 import pytest
@@ -19,6 +20,25 @@ def tiny_dataset(tmp_path_factory):
     cfg = load_config(TINY_DATA + [f"data.root={root}"], method="mctd")
     path, _ = make_dataset(cfg, progress=False)
     return cfg, path
+
+
+@contextlib.contextmanager
+def torch_threads(n: int):
+    """2 shared cores: OpenMP threads stall badly when a neighbour is busy; 1 thread is steady."""
+    import torch
+
+    before = torch.get_num_threads()
+    torch.set_num_threads(n)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(before)
+
+
+@pytest.fixture
+def one_torch_thread():
+    with torch_threads(1):
+        yield
 
 
 TINY_DATA = ["env=pointmaze-medium", "data.episodes=8", "data.episode_steps=301",
@@ -43,10 +63,8 @@ def tiny_checkpoint(tiny_dataset, tmp_path_factory):
     args = tiny_args(data_cfg.data.root, out)
     cfg = load_config(args + ["train.max_steps=30", "train.batch_size=16", "train.ckpt_every=30",
                               "train.val_every=30", "train.val_batches=1"], method="mctd")
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    train(cfg, train_data(cfg, load_dataset(cfg)), out, progress=False)
-    torch.set_num_threads(threads)
+    with torch_threads(1):
+        train(cfg, train_data(cfg, load_dataset(cfg)), out, progress=False)
     return args, out
 
 

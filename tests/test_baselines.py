@@ -1,7 +1,6 @@
 """Baselines without search: Diffusion Forcing planner, and replanning cadence of the episode loop."""
 
 import numpy as np
-import torch
 
 from fmctd_dist.config import load_config
 from fmctd_dist.denoiser.local import LocalDenoiser
@@ -34,8 +33,7 @@ def test_replanning_every_50_steps():
     assert len(planner.calls) == 1
 
 
-def test_diffusion_forcing_planner(tiny_checkpoint):
-    torch.set_num_threads(1)
+def test_diffusion_forcing_planner(tiny_checkpoint, one_torch_thread):
     args, ckpt = tiny_checkpoint
     cfg = load_config(args + ["method=diffusion-forcing", "jump=1"])
     model, manifest = load_checkpoint(ckpt, cfg)

@@ -27,16 +27,11 @@ from fmctd_dist.errors import CheckpointError, ConfigError
 from fmctd_dist.planners import make_planner
 from fmctd_dist.planners.diffuser import DiffuserPlanner, uniform_levels
 
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
+
 TINY_UNET = ["model.unet_channels=[8,16]", "diffusion.levels=4", "env.max_steps=100"]
 GOAL = np.array([20.0, 20.0])
 
-
-@pytest.fixture(autouse=True, scope="module")
-def one_thread():
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
 
 
 def tiny_unet(n_tokens: int = 11) -> TemporalUnet:

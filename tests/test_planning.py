@@ -15,16 +15,11 @@ from fmctd_dist.envs import make_env
 from fmctd_dist.evaluation.episode import run_episode
 from fmctd_dist.planners import make_planner, plan_seed
 
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
+
 SEARCH = ["method=p-mctd", "method.parallel=8", "method.budget=24", "method.early_stop=false",
           "method.warp_threshold=1000"]  # an untrained model warps; keep its plans as real outputs
 
-
-@pytest.fixture(autouse=True)
-def one_thread():
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
 
 
 def planner_for(tiny_checkpoint, micro_batch, *extra):

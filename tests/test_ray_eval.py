@@ -24,19 +24,12 @@ from fmctd_dist.config import REPO_ROOT, load_config
 from fmctd_dist.errors import CheckpointError
 from fmctd_dist.evaluation.grid import prepare
 
-pytestmark = pytest.mark.ray
+pytestmark = [pytest.mark.ray, pytest.mark.usefixtures("one_torch_thread")]
 
 SEARCH = ["method=p-mctd", "method.parallel=8", "method.budget=24", "method.early_stop=false",
           "method.warp_threshold=1000"]
 ROWS = "p-mctd/pointmaze-medium/task=*/seed=*.parquet"
 
-
-@pytest.fixture(autouse=True)
-def one_thread():
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
 
 
 def eval_job(args, env=None, **kw):

@@ -8,7 +8,6 @@ import time
 import numpy as np
 import pytest
 import ray
-import torch
 
 from fmctd_dist.config import load_config
 from fmctd_dist.denoiser.local import LocalDenoiser
@@ -18,19 +17,12 @@ from fmctd_dist.errors import DeviceError
 from fmctd_dist.evaluation.grid import prepare
 from fmctd_dist.planners import make_planner
 
-pytestmark = pytest.mark.ray
+pytestmark = [pytest.mark.ray, pytest.mark.usefixtures("one_torch_thread")]
 
 SEARCH = ["method=p-mctd", "method.parallel=8", "method.budget=24", "method.early_stop=false",
           "method.warp_threshold=1000", "ray.micro_batch=2"]  # 4 micro-batches per call: some always queued
 START, GOAL = np.array([0.0, 0.0]), np.array([20.0, 20.0])
 
-
-@pytest.fixture(autouse=True)
-def one_thread():
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
 
 
 def prepared_with(tiny_checkpoint, *extra):

@@ -17,16 +17,10 @@ from fmctd_dist.diffusion.sampler import make_consts, run_levels, transition
 from fmctd_dist.diffusion.schedule import PyramidSchedule, alphas_cumprod, level_timesteps, linear_betas
 from fmctd_dist.errors import DeviceError
 
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
+
 CFG = DiffusionConfig()
 
-
-@pytest.fixture(autouse=True, scope="module")
-def one_thread():
-    """2 shared cores: OpenMP threads stall badly when a neighbour is busy; 1 thread is steady."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
 FS = 10
 D = 2 * FS
 

@@ -13,13 +13,8 @@ from fmctd_dist.diffusion.model import DFTransformer
 from fmctd_dist.diffusion.train import DFLoss, lr_at, train
 from fmctd_dist.errors import CheckpointError
 
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
-@pytest.fixture(autouse=True, scope="module")
-def one_thread():
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
 
 
 class FakeData:
