@@ -19,7 +19,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from fmctd_dist.config import Config, ModelConfig
+from fmctd_dist.config import REPO_ROOT, Config, ModelConfig
 from fmctd_dist.data.tokens import Normaliser
 from fmctd_dist.diffusion.model import DFTransformer
 from fmctd_dist.diffusion.models import build_model, model_config_from_dict
@@ -100,7 +100,12 @@ def _train_fix(cfg: Config | None) -> str:
     default = ModelConfig()
     extra = "".join(f" model.{f}={str(getattr(cfg.model, f)).replace(' ', '')}" for f in _model_fields(cfg)
                     if getattr(cfg.model, f) != getattr(default, f))
-    return f"train one with `python jobs/train.py env={cfg.env.name} jump={cfg.jump}{extra}`"
+    out = cfg.checkpoint_dir()
+    try:
+        out = out.relative_to(REPO_ROOT)
+    except ValueError:
+        pass
+    return f"train one with `python jobs/train.py env={cfg.env.name} jump={cfg.jump}{extra} train.out={out}`"
 
 
 def read_manifest(ckpt_dir: str | Path, cfg: Config | None = None) -> dict[str, Any]:
