@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
@@ -89,7 +88,3 @@ def run_local(p: Prepared, store: ResultStore, progress: bool = True,
         bar.set_postfix(success=f"{sum(r['success'] for r in rows)}/{len(rows)}")
         log(describe(row))
     return rows
-
-
-def elapsed(t0: float) -> str:
-    return f"{time.time() - t0:.1f}s"
