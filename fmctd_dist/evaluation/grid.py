@@ -58,6 +58,11 @@ def grid(cfg: Config) -> list[tuple[int, int]]:
     return [(t, s) for t in cfg.eval.tasks for s in cfg.eval.seeds]
 
 
+def missing(cfg: Config, store: ResultStore) -> list[tuple[int, int]]:
+    """The (task, seed) keys of the grid that have no row yet: what a (re)run still has to do."""
+    return [(t, s) for t, s in grid(cfg) if not store.has(cfg.method.name, cfg.env.name, t, s)]
+
+
 def provenance(p: Prepared, n_actors: int) -> dict[str, Any]:
     return {"n_denoiser_actors": n_actors, "device": p.device, "git_sha": p.git_sha,
             "checkpoint_digest": p.checkpoint_digest, "config_hash": p.config_hash}
@@ -72,7 +77,7 @@ def run_local(p: Prepared, store: ResultStore, progress: bool = True,
     from fmctd_dist.planners import make_planner
 
     cfg = p.cfg
-    todo = [(t, s) for t, s in grid(cfg) if not store.has(cfg.method.name, cfg.env.name, t, s)]
+    todo = missing(cfg, store)
     if not todo:
         return []
     denoiser = LocalDenoiser.from_checkpoint(p.checkpoint, cfg, expect_digest=p.checkpoint_digest)

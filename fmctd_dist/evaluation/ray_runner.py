@@ -34,7 +34,7 @@ from fmctd_dist.config import Config, load_config
 from fmctd_dist.denoiser.ray_pool import DenoiserPool, RayDenoiser, unwrap_ray_error
 from fmctd_dist.errors import ConfigError, DeviceError
 from fmctd_dist.evaluation.episode import describe
-from fmctd_dist.evaluation.grid import Prepared, grid, prepare, provenance
+from fmctd_dist.evaluation.grid import Prepared, grid, missing, prepare, provenance
 from fmctd_dist.evaluation.results import ResultStore
 from fmctd_dist.planners.base import PlanOutput
 
@@ -150,7 +150,7 @@ def run_ray(p: Prepared, store: ResultStore, progress: bool = True,
             log: Callable[[str], None] = print) -> list[dict[str, Any]]:
     """All missing episodes of the grid on Ray; rows written here as they finish."""
     cfg = p.cfg
-    todo = [(t, s) for t, s in grid(cfg) if not store.has(cfg.method.name, cfg.env.name, t, s)]
+    todo = missing(cfg, store)
     if not todo:
         return []
     check_ray_config(p)
