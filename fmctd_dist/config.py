@@ -128,6 +128,8 @@ class EvalConfig:
     out: str = "results"  # results root; rows go to <out>/<run>/<method>/<env>/...
     run: str = "default"
     episode_time_limit: float = 0.0  # seconds of planning per episode; 0 = none
+    threads: int = 0  # torch threads of an in-process denoiser (runner=local, bench_speed); 0 = torch default.
+    # Set 1 when other jobs share the cores: 2 spinning threads on a busy 2-core machine run 10x slower.
 
 
 @dataclass
@@ -327,7 +329,7 @@ def validate(cfg: Config) -> None:
               "ray.call_timeout_s", "diffusion.levels", "diffusion.timesteps")
     _non_negative(cfg, "data.seed", "train.seed", "seed", "method.virtual_weight", "data.noise",
                   "method.replan_every", "eval.episode_time_limit", "ray.num_gpus",
-                  "ray.max_restarts")
+                  "ray.max_restarts", "eval.threads", "train.threads")
     step = cfg.jump * cfg.model.frame_stack
     if cfg.env.horizon % step:
         raise ConfigError(

@@ -5,7 +5,8 @@
     python jobs/bench_denoiser.py --throughput                     # transitions/s table only
 
 Quality, per checkpoint: validation loss (manifest), then 100 unguided and 100 guided plans
-(20 per task start, full pyramid schedule = plain Diffusion Forcing sampling): share of plans
+(20 per task start, full pyramid schedule = plain Diffusion Forcing sampling; Diffuser
+checkpoints: all tokens denoised together, start inpainted): share of plans
 without a warp (a step over the method's warp threshold), share of plan points inside free
 maze cells, share of guided plans that come within 2.0 of the goal. These say whether a
 search has anything to work with. Throughput: guided DDIM transitions per second.
@@ -28,18 +29,26 @@ from fmctd_dist.diffusion.checkpoint import load_checkpoint, normaliser_from_man
 from fmctd_dist.diffusion.model import DFTransformer
 from fmctd_dist.diffusion.schedule import PyramidSchedule
 from fmctd_dist.envs import maze_geometry
+from fmctd_dist.planners.diffuser import uniform_levels
 
 SAMPLES_PER_TASK = 20
 
 
+def full_levels(cfg) -> np.ndarray:
+    """[R+1, T] the whole denoising schedule of a plan: the pyramid (DF) or all tokens together (Diffuser)."""
+    if cfg.model.kind == "diffuser":
+        return uniform_levels(cfg.plan_tokens, cfg.diffusion.levels)
+    return PyramidSchedule(cfg.plan_tokens, cfg.diffusion.levels).full()
+
+
 def sample_plans(denoiser, cfg, codec, start, goal, scale, seed) -> np.ndarray:
-    """[n, F, 2] world plans from the full pyramid, one noise seed per sample."""
+    """[n, F, 2] world plans from the full schedule, one noise seed per sample."""
     n = len(start)
-    sched = PyramidSchedule(cfg.plan_tokens, cfg.diffusion.levels)
+    full = full_levels(cfg)
     noise = np.stack([np.random.default_rng([seed, i]).standard_normal((cfg.plan_tokens, cfg.token_dim))
                       for i in range(n)]).astype(np.float32)
     x = np.concatenate([codec.context(start), np.clip(noise, -20, 20)], axis=1)
-    levels = np.broadcast_to(sched.full(), (n, *sched.full().shape)).copy()
+    levels = np.broadcast_to(full, (n, *full.shape)).copy()
     norm = codec.normaliser
     out = denoiser.denoise(DenoiseBatch(x, levels, np.full(n, scale, np.float32), norm.normalise(start),
                                         norm.normalise(goal)))

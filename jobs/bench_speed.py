@@ -3,7 +3,7 @@
     python jobs/bench_speed.py env=pointmaze-medium tasks=[1,2,3,4,5] seeds=[0,1]
     python jobs/bench_speed.py env=pointmaze-giant methods=[mctd,fast-mctd] eval.episode_time_limit=600
 
-For each method (default: mctd, p-mctd, s-mctd, fast-mctd) every episode is run in this
+For each method (default: mctd, p-mctd, s-mctd, fast-mctd, diffuser) every episode is run in this
 process with a LocalDenoiser on that method's checkpoint, interleaved per episode so load
 on the machine hits all methods alike. Prints success, mean planning time, the share of
 planning time inside the denoiser, and planning-time ratios against Fast-MCTD — ratios, not
@@ -26,7 +26,7 @@ from fmctd_dist.envs import make_env
 from fmctd_dist.evaluation.episode import describe, run_episode
 from fmctd_dist.planners import make_planner
 
-DEFAULT_METHODS = ["mctd", "p-mctd", "s-mctd", "fast-mctd"]
+DEFAULT_METHODS = ["mctd", "p-mctd", "s-mctd", "fast-mctd", "diffuser"]
 
 
 def build(method: str, overrides: list[str]):
@@ -46,6 +46,8 @@ def main(argv: list[str]) -> int:
             rest.append(a)
     setups = {m: build(m, rest) for m in methods}  # every config and checkpoint checked up front
     cfg0 = next(iter(setups.values()))[0]
+    if cfg0.eval.threads > 0:
+        torch.set_num_threads(cfg0.eval.threads)
     env = make_env(cfg0.env.name, cfg0.env.protocol)
     rows: dict[str, list[dict]] = {m: [] for m in methods}
     t0 = time.time()

@@ -28,7 +28,7 @@ def run_episode(cfg: Config, env: PointMaze, planner: Planner, task: int, seed: 
     pos, goal = reset.obs, reset.goal
     traj, first_plan = [pos], None
     steps, success, timed_out = 0, False, False
-    plan_time = denoise_time = 0.0
+    plan_time = denoise_time = call_time = 0.0
     expansions = iterations = retries = n_plans = 0
     statuses = []
     while steps < cfg.env.max_steps and not success:
@@ -36,6 +36,7 @@ def run_episode(cfg: Config, env: PointMaze, planner: Planner, task: int, seed: 
         n_plans += 1
         plan_time += out.plan_time_s
         denoise_time += out.denoise_time_s
+        call_time += out.denoise_call_s
         expansions, iterations, retries = expansions + out.expansions, iterations + out.iterations, retries + out.retries
         statuses.append(out.status)
         first_plan = out.waypoints if first_plan is None else first_plan
@@ -61,6 +62,8 @@ def run_episode(cfg: Config, env: PointMaze, planner: Planner, task: int, seed: 
         "denoise_time_s": denoise_time,
         "overhead_s": plan_time - denoise_time,
         "denoise_share": denoise_time / plan_time if plan_time > 0 else 0.0,
+        "denoise_call_s": call_time,
+        "call_share": call_time / plan_time if plan_time > 0 else 0.0,
         "expansions": expansions,
         "iterations": iterations,
         "retries": retries,

@@ -64,8 +64,13 @@ def missing(cfg: Config, store: ResultStore) -> list[tuple[int, int]]:
 
 
 def provenance(p: Prepared, n_actors: int) -> dict[str, Any]:
+    """Run-level fields of a row: where it ran, and the search knobs the ablation tables group by."""
+    m = p.cfg.method
     return {"n_denoiser_actors": n_actors, "device": p.device, "git_sha": p.git_sha,
-            "checkpoint_digest": p.checkpoint_digest, "config_hash": p.config_hash}
+            "checkpoint_digest": p.checkpoint_digest, "config_hash": p.config_hash,
+            "parallel": m.parallel, "virtual_weight": m.virtual_weight, "redundancy_aware": m.redundancy_aware,
+            "leaf_parallel": m.leaf_parallel, "jump": p.cfg.jump, "budget": m.budget,
+            "episode_time_limit": p.cfg.eval.episode_time_limit}
 
 
 def run_local(p: Prepared, store: ResultStore, progress: bool = True,
@@ -80,6 +85,10 @@ def run_local(p: Prepared, store: ResultStore, progress: bool = True,
     todo = missing(cfg, store)
     if not todo:
         return []
+    if cfg.eval.threads > 0:
+        import torch
+
+        torch.set_num_threads(cfg.eval.threads)
     denoiser = LocalDenoiser.from_checkpoint(p.checkpoint, cfg, expect_digest=p.checkpoint_digest)
     manifest = read_manifest(p.checkpoint)
     planner = make_planner(cfg, denoiser, normaliser_from_manifest(manifest), cfg.eval.episode_time_limit)

@@ -14,6 +14,14 @@ import numpy as np  # noqa: E402
 from fmctd_dist.envs.maze import MAZE_UNIT, MazeGeometry  # noqa: E402
 
 
+def _save(fig, path: Path) -> Path:
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
 def draw_maze(ax, geo: MazeGeometry) -> None:
     """Walls as grey squares in world coordinates."""
     for i, j in zip(*np.nonzero(geo.walls)):
@@ -42,11 +50,7 @@ def plot_episode(row: dict[str, Any], geo: MazeGeometry, path: Path) -> Path:
     ax.set_title(f"{row['method']} {row['env']} task {row['task']} seed {row['seed']}: {outcome}, "
                  f"{row['plan_time_s']:.1f}s planning", fontsize=8)
     ax.legend(loc="lower right", fontsize=7)
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return _save(fig, path)
 
 
 def plot_success_vs_time(summary: list[dict[str, Any]], path: Path) -> Path:
@@ -67,8 +71,26 @@ def plot_success_vs_time(summary: list[dict[str, Any]], path: Path) -> Path:
     ax.set_ylim(-5, 105)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7)
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return _save(fig, path)
+
+
+def plot_ablation(summary: list[dict[str, Any]], knob: str, path: Path, log_x: bool = False) -> Path:
+    """Success (left axis) and planning time (right axis) against one search knob, error bars over seeds."""
+    x = np.arange(len(summary)) if not log_x else np.array([float(s["value"]) for s in summary])
+    fig, ax = plt.subplots(figsize=(5, 3.2))
+    ax.errorbar(x, [s["success"] for s in summary], yerr=[s["success_std"] for s in summary], marker="o",
+                color="tab:blue", capsize=3, label="success")
+    ax.set_ylabel("success (%)", color="tab:blue")
+    ax.set_ylim(-5, 105)
+    ax2 = ax.twinx()
+    ax2.errorbar(x, [s["plan_time_s"] for s in summary], yerr=[s["plan_time_std"] for s in summary], marker="s",
+                 color="tab:orange", capsize=3, label="planning time")
+    ax2.set_ylabel("planning time (s)", color="tab:orange")
+    if log_x:
+        ax.set_xscale("log")
+        ax.set_xticks(x, [str(s["value"]) for s in summary])
+    else:
+        ax.set_xticks(x, [str(s["value"]) for s in summary])
+    ax.set_xlabel(knob)
+    ax.grid(alpha=0.3)
+    return _save(fig, path)

@@ -63,7 +63,9 @@ def summarise(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
             "method": method, "env": env, "episodes": len(rs), "seeds": len(seeds),
             "success": succ.mean(), "success_std": succ.std(),
             "plan_time_s": t.mean(), "plan_time_std": t.std(),
-            "denoise_share": share.mean(), "timed_out": int(sum(r.get("timed_out", False) for r in rs)),
+            "denoise_share": share.mean(),
+            "call_share": float(np.mean([r.get("call_share", np.nan) for r in rs])),
+            "timed_out": int(sum(r.get("timed_out", False) for r in rs)),
             "per_task": {k: 100.0 * np.mean([r["success"] for r in rs if r["task"] == k])
                          for k in sorted({r["task"] for r in rs})},
         })

@@ -21,6 +21,7 @@ class PlanOutput:
     denoise_calls: int = 0
     retries: int = 0
     timed_out: bool = False
+    denoise_call_s: float = 0.0  # wall time inside denoiser calls; > denoise_time_s by queueing/transport (Ray)
     extra: dict = field(default_factory=dict)
 
 

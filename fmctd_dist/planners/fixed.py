@@ -35,8 +35,10 @@ class FixedSchedulePlanner:
         x = np.concatenate([self.codec.context(start), noise[None]], axis=1)  # [1, P+1, D]
         batch = DenoiseBatch(x, self.levels[None].copy(), np.array([cfg.method.guidance_scale], np.float32),
                              norm.normalise(start), norm.normalise(np.asarray(goal, np.float64)[None]))
+        t_call = time.perf_counter()
         out = self.denoiser.denoise(batch)
+        t_call = time.perf_counter() - t_call
         plan = self.codec.decode(out.x)[0]
         return PlanOutput(waypoints=repeat_waypoints(plan, cfg.jump), status="plan",
                           plan_time_s=time.perf_counter() - t0, denoise_time_s=out.denoise_time_s,
-                          denoise_calls=1, retries=out.retries)
+                          denoise_calls=1, retries=out.retries, denoise_call_s=t_call)

@@ -45,5 +45,6 @@ class MCTDPlanner:
             denoise_calls=r.denoise_calls,
             retries=r.retries,
             timed_out=r.timed_out,
+            denoise_call_s=r.denoise_call_s,
             extra={"stop_reason": r.stop_reason, "value": float(r.value)},
         )

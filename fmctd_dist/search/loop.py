@@ -109,13 +109,14 @@ class SearchResult:
     expansions: int  # expansion jobs run (budget units)
     iterations: int  # iterations that ran jobs
     denoise_calls: int  # Denoiser.denoise calls
-    denoise_time_s: float  # sum of DenoiseResult.denoise_time_s
+    denoise_time_s: float  # sum of DenoiseResult.denoise_time_s (compute inside the denoiser)
     wall_time_s: float
     timed_out: bool
     stop_reason: str  # early_stop | budget | time | exhausted | stalled
     tree: Tree
     retries: int = 0  # sum of DenoiseResult.retries
     resampled: int = 0  # bad-plan job re-runs
+    denoise_call_s: float = 0.0  # wall time inside Denoiser.denoise calls (compute + queueing + transport)
     stats: list[IterStats] = field(default_factory=list)
 
 
@@ -137,9 +138,9 @@ def stack_levels(levels: list[np.ndarray]) -> np.ndarray:
 class _Runner:
     """Wraps the denoiser: builds batches, checks shapes, sums call counts and timings."""
 
-    def __init__(self, denoiser: Denoiser, start_n: np.ndarray, goal_n: np.ndarray):
-        self.denoiser, self.start_n, self.goal_n = denoiser, start_n, goal_n
-        self.calls, self.time_s, self.retries = 0, 0.0, 0
+    def __init__(self, denoiser: Denoiser, start_n: np.ndarray, goal_n: np.ndarray, clock: Callable[[], float]):
+        self.denoiser, self.start_n, self.goal_n, self.clock = denoiser, start_n, goal_n, clock
+        self.calls, self.time_s, self.call_s, self.retries = 0, 0.0, 0.0, 0
 
     def __call__(self, x: np.ndarray, levels: np.ndarray, scale: np.ndarray) -> np.ndarray:
         b = x.shape[0]
@@ -150,7 +151,9 @@ class _Runner:
             start=np.repeat(self.start_n[None], b, 0),
             goal=np.repeat(self.goal_n[None], b, 0),
         )
+        t0 = self.clock()
         res = self.denoiser.denoise(batch)
+        self.call_s += self.clock() - t0
         assert res.x.shape == batch.x.shape, f"denoiser returned {res.x.shape} for a batch of {batch.x.shape}"
         self.calls += 1
         self.time_s += float(res.denoise_time_s)
@@ -206,7 +209,7 @@ def search(
                       frames, schedule.terminal_depth, d)
     rng = np.random.default_rng(np.random.SeedSequence([plan_seed, SELECT_TAG]))
     ctx = codec.context(start[None])[0]  # [1, D]
-    run = _Runner(denoiser, codec.normaliser.normalise(start), codec.normaliser.normalise(goal))
+    run = _Runner(denoiser, codec.normaliser.normalise(start), codec.normaliser.normalise(goal), clock)
 
     def expand(asg: Assignment, idx: np.ndarray, attempt: np.ndarray) -> np.ndarray:
         depth = tree.depth[asg.parent[idx]] + 1  # [B]
@@ -305,5 +308,6 @@ def search(
         tree=tree,
         retries=run.retries,
         resampled=resampled,
+        denoise_call_s=run.call_s,
         stats=stats,
     )

@@ -1,0 +1,137 @@
+"""The paper-format report: every table in docs/results.md that comes from evaluation rows.
+
+Rows are read from ``<results>/<run>/<method>/<env>/task=<k>/seed=<s>.parquet`` (the
+ResultStore layout; a run name may contain ``/``, e.g. ``ablate-k/10``). The maze table uses
+the run ``main``; each ablation reads the runs under its prefix and groups them by the search
+knob its rows record (``parallel``, ``virtual_weight``, ...), so a row can never be filed
+under the wrong setting. Tables are written between ``<!-- report:NAME -->`` markers, so the
+prose around them stays hand-written and the numbers stay generated.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyarrow.parquet as pq
+
+from fmctd_dist.evaluation.paper import paper_cell
+from fmctd_dist.evaluation.results import summarise
+
+METHOD_ORDER = ["diffuser", "diffuser-replan", "diffusion-forcing", "mctd", "p-mctd", "s-mctd", "fast-mctd"]
+ENV_ORDER = ["pointmaze-medium", "pointmaze-large", "pointmaze-giant"]
+
+
+@dataclass(frozen=True)
+class Ablation:
+    """One ablation table: runs under ``prefix``, grouped by the row field ``knob``."""
+
+    name: str
+    title: str
+    prefix: str
+    knob: str
+    paper: dict[Any, str]  # knob value -> the paper's cell (P-MCTD or Fast-MCTD, PointMaze-giant)
+
+
+ABLATIONS = [
+    Ablation("ablate-w", "virtual-visit weight w", "ablate-w", "virtual_weight",
+             {0.0: "221.3 ± 109.6 s", 0.1: "14.0 ± 2.5 s", 1.0: "12.8 ± 2.3 s", 5.0: "12.5 ± 2.1 s"}),
+    Ablation("ablate-ras", "redundancy-aware selection", "ablate-ras", "redundancy_aware",
+             {True: "12.8 ± 2.5 s", False: "18.4 ± 0.9 s"}),
+    Ablation("ablate-leaf", "leaf parallelization", "ablate-leaf", "leaf_parallel",
+             {False: "100 ± 0 / 12.8 ± 2.5 s", True: "100 ± 0 / 17.0 ± 2.8 s"}),
+    Ablation("ablate-k", "parallelism K", "ablate-k", "parallel", {}),
+    Ablation("ablate-h", "interval H", "ablate-h", "jump", {}),
+]
+
+
+def load_rows(root: str | Path, prefix: str = "") -> list[dict[str, Any]]:
+    """Every row under ``root`` whose run name starts with ``prefix``; adds ``run`` to each."""
+    root = Path(root)
+    out = []
+    for f in sorted(root.glob("**/task=*/seed=*.parquet")):
+        run = "/".join(f.relative_to(root).parts[:-4])
+        if not prefix or run == prefix or run.startswith(prefix + "/"):
+            for r in pq.read_table(f).to_pylist():
+                out.append({**r, "run": run})
+    return out
+
+
+def _pm(mean: float, std: float, fmt: str = ".0f") -> str:
+    return f"{mean:{fmt}} ± {std:{fmt}}"
+
+
+def _shares(s: dict[str, Any]) -> str:
+    calls = "–" if np.isnan(s.get("call_share", np.nan)) else f"{100 * s['call_share']:.1f}%"
+    return f"{100 * s['denoise_share']:.1f}% / {calls}"
+
+
+def maze_table(rows: list[dict[str, Any]]) -> str:
+    """The paper's Table "Maze results": one line per (method, env) in the paper's order."""
+    summary = summarise(rows)
+    key = {(s["method"], s["env"]): s for s in summary}
+    lines = ["| method | env | episodes (tasks x seeds) | success (%) | planning time (s) | in denoiser: compute / calls | "
+             "success per task | paper: success / time (GPU) |", "|---|---|---|---|---|---|---|---|"]
+    # "in denoiser": share of planning time spent computing inside denoiser actors / inside denoiser calls
+    # (the latter adds queueing behind other env actors and Ray transport; "–" for rows recorded before it existed)
+    envs = ENV_ORDER
+    methods = METHOD_ORDER
+    for env in envs:
+        for m in methods:
+            s = key.get((m, env))
+            if s is None:
+                lines.append(f"| {m} | {env} | not run | | | | | {paper_cell(m, env)} |")
+                continue
+            n_tasks = len(s["per_task"])
+            timed_out = f" ({s['timed_out']} timed out)" if s["timed_out"] else ""
+            lines.append(
+                f"| {m} | {env} | {s['episodes']} ({n_tasks} x {s['seeds']}) | "
+                f"{_pm(s['success'], s['success_std'])}{timed_out} | {_pm(s['plan_time_s'], s['plan_time_std'], '.2f')} | "
+                f"{_shares(s)} | {'/'.join(f'{v:.0f}' for v in s['per_task'].values())} | "
+                f"{paper_cell(m, env)} |")
+    return "\n".join(lines)
+
+
+def ablation_summary(rows: list[dict[str, Any]], knob: str) -> list[dict[str, Any]]:
+    """Per knob value: success and planning time (± std over seeds), expansions, iterations."""
+    values = sorted({r[knob] for r in rows if knob in r})
+    out = []
+    for v in values:
+        rs = [r for r in rows if r.get(knob) == v]
+        s = summarise([{**r, "method": "x", "env": "x"} for r in rs])[0]
+        out.append({**s, "value": v, "method": sorted({r["method"] for r in rs}), "env": sorted({r["env"] for r in rs}),
+                    "expansions": float(np.mean([r["expansions"] for r in rs])),
+                    "iterations": float(np.mean([r["iterations"] for r in rs]))})
+    return out
+
+
+def ablation_table(ab: Ablation, rows: list[dict[str, Any]]) -> str:
+    summary = ablation_summary(rows, ab.knob)
+    ref = next((s for s in summary if s["value"] in (1.0, True, 200, 5) and ab.knob != "leaf_parallel"), None)
+    if ab.knob == "leaf_parallel":
+        ref = next((s for s in summary if s["value"] is False), None)
+    lines = [f"| {ab.knob} | method / env | episodes (tasks x seeds) | success (%) | planning time (s) | "
+             f"time / default | expansions | iterations | in denoiser: compute / calls | paper (PointMaze-giant) |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
+    for s in summary:
+        ratio = f"{s['plan_time_s'] / ref['plan_time_s']:.2f}x" if ref else "–"
+        timed_out = f" ({s['timed_out']} timed out)" if s["timed_out"] else ""
+        lines.append(
+            f"| {s['value']} | {','.join(s['method'])} / {','.join(e.replace('pointmaze-', '') for e in s['env'])} | "
+            f"{s['episodes']} ({len(s['per_task'])} x {s['seeds']}) | {_pm(s['success'], s['success_std'])}{timed_out} | "
+            f"{_pm(s['plan_time_s'], s['plan_time_std'], '.2f')} | {ratio} | {s['expansions']:.0f} | "
+            f"{s['iterations']:.1f} | {_shares(s)} | {ab.paper.get(s['value'], '–')} |")
+    return "\n".join(lines)
+
+
+def fill_markers(text: str, sections: dict[str, str]) -> str:
+    """Replace the body between ``<!-- report:NAME -->`` and ``<!-- /report:NAME -->`` for each NAME."""
+    for name, body in sections.items():
+        pattern = re.compile(rf"(<!-- report:{re.escape(name)} -->\n).*?(<!-- /report:{re.escape(name)} -->)", re.S)
+        if not pattern.search(text):
+            raise KeyError(f"docs/results.md has no '<!-- report:{name} -->' ... '<!-- /report:{name} -->' block")
+        text = pattern.sub(lambda m: m.group(1) + body.rstrip() + "\n" + m.group(2), text)
+    return text

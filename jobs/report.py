@@ -1,0 +1,82 @@
+"""Regenerate the evaluation tables and figures of docs/results.md from the Parquet rows.
+
+    python jobs/report.py                          # results/ -> docs/results.md + docs/figures/
+    python jobs/report.py results=/tmp/res doc=/tmp/results.md
+
+Reads the run ``main`` (the maze table: every method x maze) and the ablation runs
+``ablate-w/*``, ``ablate-ras/*``, ``ablate-leaf/*``, ``ablate-k/*``, ``ablate-h/*`` (made by
+``jobs/eval.py ... eval.run=ablate-k/10`` etc.; the commands are in docs/results.md), and
+rewrites only the blocks between ``<!-- report:NAME -->`` markers. Also writes
+``docs/eval_rows.parquet``: every row without its plan/trajectory arrays, so each number in the
+tables can be traced to its episodes from git alone.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from fmctd_dist.cli import run
+from fmctd_dist.config import REPO_ROOT, resolve_path
+from fmctd_dist.envs import maze_geometry
+from fmctd_dist.evaluation.plots import plot_ablation, plot_episode, plot_success_vs_time
+from fmctd_dist.evaluation.report import ABLATIONS, ENV_ORDER, ablation_summary, ablation_table, fill_markers, \
+    load_rows, maze_table
+from fmctd_dist.evaluation.results import summarise
+from fmctd_dist.errors import ConfigError
+
+
+def parse(argv: list[str]) -> dict[str, str]:
+    opts = {"results": "results", "doc": "docs/results.md", "figures": "docs/figures"}
+    for a in argv:
+        key, sep, value = a.partition("=")
+        if not sep or key not in opts:
+            raise ConfigError(f"report: unknown argument {a!r}; expected any of "
+                              + ", ".join(f"{k}=<path>" for k in opts))
+        opts[key] = value
+    return opts
+
+
+def main(argv: list[str]) -> int:
+    opts = parse(argv)
+    root, doc, figures = resolve_path(opts["results"]), resolve_path(opts["doc"]), resolve_path(opts["figures"])
+    if not root.is_dir():
+        raise ConfigError(f"report: results={root} does not exist; run jobs/eval.py first (eval.out=...)")
+    sections: dict[str, str] = {}
+    all_rows = []
+
+    main_rows = load_rows(root, "main")
+    all_rows += main_rows
+    if main_rows:
+        sections["maze"] = maze_table(main_rows)
+        plot_success_vs_time(summarise(main_rows), figures / "success_vs_time.png")
+        for env in ENV_ORDER:  # one Fast-MCTD plan per maze, drawn with what the controller executed
+            rs = sorted((r for r in main_rows if r["method"] == "fast-mctd" and r["env"] == env),
+                        key=lambda r: (not r["success"], r["task"], r["seed"]))
+            if rs:
+                plot_episode(rs[0], maze_geometry(env), figures / f"plan_{env}.png")
+
+    for ab in ABLATIONS:
+        rows = load_rows(root, ab.prefix)
+        all_rows += rows
+        if rows:
+            sections[ab.name] = ablation_table(ab, rows)
+            if ab.knob in ("parallel", "jump"):
+                plot_ablation(ablation_summary(rows, ab.knob), ab.knob, figures / f"{ab.name}.png")
+
+    text = fill_markers(doc.read_text(), sections)
+    doc.write_text(text)
+    if all_rows:
+        lean = [{k: v for k, v in r.items() if k not in ("plan_xy", "traj_xy")} for r in all_rows]
+        pq.write_table(pa.Table.from_pylist(lean), doc.parent / "eval_rows.parquet")
+    for name, body in sections.items():
+        print(f"## {name}\n{body}\n")
+    print(f"{len(all_rows)} rows from {root}; updated {len(sections)} blocks in "
+          f"{doc.relative_to(REPO_ROOT) if doc.is_relative_to(REPO_ROOT) else doc}; figures in {figures}")
+    return 0
+
+
+if __name__ == "__main__":
+    run(main)

@@ -1,0 +1,50 @@
+"""The generated report: rows found by run prefix, ablations grouped by the knob each row records."""
+
+import pytest
+
+from fmctd_dist.evaluation.report import ABLATIONS, ablation_summary, ablation_table, fill_markers, load_rows, \
+    maze_table
+from fmctd_dist.evaluation.results import ResultStore
+
+
+def row(task, seed, success, t=1.0, method="fast-mctd", env="pointmaze-giant", **knobs):
+    return {"method": method, "env": env, "task": task, "seed": seed, "success": success, "plan_time_s": t,
+            "denoise_share": 0.5, "call_share": 0.99, "timed_out": False, "expansions": 100, "iterations": 3,
+            **knobs}
+
+
+def test_rows_are_found_by_run_prefix_including_nested_runs(tmp_path):
+    ResultStore(tmp_path, "main").write(row(1, 0, True, env="pointmaze-medium"))
+    ResultStore(tmp_path, "ablate-k/10").write(row(1, 0, True, parallel=10))
+    ResultStore(tmp_path, "ablate-k/200").write(row(1, 0, False, parallel=200))
+    ResultStore(tmp_path, "ablate-kx/1").write(row(1, 0, False, parallel=1))  # not under "ablate-k/"
+    assert [r["run"] for r in load_rows(tmp_path, "main")] == ["main"]
+    assert sorted(r["run"] for r in load_rows(tmp_path, "ablate-k")) == ["ablate-k/10", "ablate-k/200"]
+    assert len(load_rows(tmp_path)) == 4
+
+
+def test_ablation_groups_by_the_recorded_knob_not_the_run_name():
+    rows = [row(k, s, k != 1 or v == 10, t=float(v), parallel=v) for v in (10, 200) for k in (1, 2) for s in (0, 1)]
+    summary = ablation_summary(rows, "parallel")
+    assert [s["value"] for s in summary] == [10, 200]
+    assert [s["success"] for s in summary] == [100, 50] and [s["plan_time_s"] for s in summary] == [10.0, 200.0]
+    ab = next(a for a in ABLATIONS if a.knob == "parallel")
+    table = ablation_table(ab, rows)
+    assert "| 10 | fast-mctd / giant | 4 (2 x 2) | 100 ± 0 | 10.00 ± 0.00 | 0.05x |" in table
+    assert "| 200 | fast-mctd / giant | 4 (2 x 2) | 50 ± 0 | 200.00 ± 0.00 | 1.00x |" in table
+
+
+def test_maze_table_lists_every_method_and_marks_what_was_not_run():
+    table = maze_table([row(k, s, True, env="pointmaze-medium") for k in (1, 2) for s in (0, 1)])
+    assert "| fast-mctd | pointmaze-medium | 4 (2 x 2) | 100 ± 0 |" in table
+    assert "| mctd | pointmaze-giant | not run |" in table and "100 ± 0 / 264.2 ± 33.8 s" in table
+    assert "50.0% / 99.0%" in table
+
+
+def test_markers_replace_only_their_block_and_a_missing_block_is_an_error():
+    doc = "intro\n<!-- report:maze -->\nold\n<!-- /report:maze -->\noutro\n"
+    out = fill_markers(doc, {"maze": "| new |"})
+    assert out == "intro\n<!-- report:maze -->\n| new |\n<!-- /report:maze -->\noutro\n"
+    assert fill_markers(out, {"maze": "| new |"}) == out  # idempotent
+    with pytest.raises(KeyError, match="report:ablate-w"):
+        fill_markers(doc, {"ablate-w": "x"})
