@@ -24,12 +24,13 @@ def test_rows_are_found_by_run_prefix_including_nested_runs(tmp_path):
 
 
 def test_ablation_groups_by_the_recorded_knob_not_the_run_name():
-    rows = [row(k, s, k != 1 or v == 10, t=float(v), parallel=v) for v in (10, 200) for k in (1, 2) for s in (0, 1)]
+    rows = [row(k, s, k != 1 or v == 10, t=float(v), parallel=v) for v in (1, 10, 200) for k in (1, 2) for s in (0, 1)]
     summary = ablation_summary(rows, "parallel")
-    assert [s["value"] for s in summary] == [10, 200]
-    assert [s["success"] for s in summary] == [100, 50] and [s["plan_time_s"] for s in summary] == [10.0, 200.0]
+    assert [s["value"] for s in summary] == [1, 10, 200]
+    assert [s["success"] for s in summary] == [50, 100, 50] and [s["plan_time_s"] for s in summary] == [1.0, 10.0, 200.0]
     ab = next(a for a in ABLATIONS if a.knob == "parallel")
     table = ablation_table(ab, rows)
+    assert "| 1 | fast-mctd / giant | 4 (2 x 2) | 50 ± 0 | 1.00 ± 0.00 | 0.01x |" in table  # K=1 is not "True"
     assert "| 10 | fast-mctd / giant | 4 (2 x 2) | 100 ± 0 | 10.00 ± 0.00 | 0.05x |" in table
     assert "| 200 | fast-mctd / giant | 4 (2 x 2) | 50 ± 0 | 200.00 ± 0.00 | 1.00x |" in table
 
