@@ -3,6 +3,7 @@
     python jobs/bench_denoiser.py                                  # every shipped checkpoint
     python jobs/bench_denoiser.py checkpoints/pointmaze-medium-h5  # one
     python jobs/bench_denoiser.py --throughput                     # transitions/s table only
+    python jobs/bench_denoiser.py --precision checkpoints/pointmaze-medium-h1   # why plans warp
 
 Quality, per checkpoint: validation loss (manifest), then 100 unguided and 100 guided plans
 (20 per task start, full pyramid schedule = plain Diffusion Forcing sampling; Diffuser
@@ -77,6 +78,57 @@ def quality(ckpt: Path) -> dict:
     return row
 
 
+def precision(ckpt: Path, batch: int = 64, timesteps=(19, 99, 299)) -> list[str]:
+    """x0-prediction error on validation windows noised to a few timesteps, in world units.
+
+    Splits plan steps into token-boundary steps (last frame of a token -> first of the next)
+    and steps inside a token: a model whose error is a per-token offset makes smooth tokens
+    that do not join up, i.e. warps at every 10th frame.
+    """
+    from fmctd_dist.data.dataset import load_dataset
+    from fmctd_dist.data.tokens import tokens_to_frames
+    from fmctd_dist.data.windows import train_data
+    from fmctd_dist.diffusion.schedule import alphas_cumprod, make_betas
+
+    model, manifest = load_checkpoint(ckpt)
+    model.eval()
+    cfg = config_from_dict(manifest["config"])
+    data = train_data(cfg, load_dataset(cfg))
+    x = torch.as_tensor(data.val_batches(1, batch)[0])
+    fs, std = cfg.model.frame_stack, data.normaliser.std
+    ab = torch.as_tensor(alphas_cumprod(make_betas(cfg.diffusion.beta_schedule, cfg.diffusion.timesteps)),
+                         dtype=torch.float32)
+    stab = cfg.diffusion.stabilization - 1
+
+    def steps(tok):  # -> (boundary steps, inside-token steps) in world units
+        st = np.linalg.norm(np.diff(tokens_to_frames(tok[:, 1:].numpy(), fs) * std, axis=1), axis=-1)
+        at_boundary = (np.arange(st.shape[1]) + 1) % fs == 0
+        return st[:, at_boundary], st[:, ~at_boundary]
+
+    b, i = steps(x)
+    lines = [f"{ckpt.name}: {batch} validation windows; data steps: boundary mean {b.mean():.3f} max {b.max():.3f}, "
+             f"inside mean {i.mean():.3f} max {i.max():.3f}",
+             "| timestep | x0 RMS error (world) | identity RMS error | boundary step mean / max | inside step mean / max |",
+             "|---|---|---|---|---|"]
+    gen = torch.Generator().manual_seed(0)
+    for t in timesteps:
+        tt = torch.full(x.shape[:2], t)
+        tt[:, 0] = stab
+        a = ab[tt][..., None]
+        xn = a.sqrt() * x + (1 - a).sqrt() * torch.randn(x.shape, generator=gen)
+        xn[:, 0] = ab[stab].sqrt() * x[:, 0]  # the clean context, as the sampler feeds it
+        with torch.no_grad():
+            x0 = model(xn, tt)
+
+        def rms(err):
+            return float(np.sqrt(((err[:, 1:].reshape(batch, -1, 2).numpy() * std) ** 2).sum(-1).mean()))
+
+        b, i = steps(x0)
+        lines.append(f"| {t} | {rms(x0 - x):.3f} | {rms(xn / a.sqrt() - x):.3f} | {b.mean():.3f} / {b.max():.2f} | "
+                     f"{i.mean():.3f} / {i.max():.2f} |")
+    return lines
+
+
 def throughput(batches=(1, 25, 200), tokens=(11, 21, 51, 101), width=128, layers=6, reps=3) -> list[str]:
     from fmctd_dist.config import DiffusionConfig
     from fmctd_dist.diffusion.sampler import make_consts, transition
@@ -107,6 +159,10 @@ def main(argv: list[str]) -> None:
     if argv and argv[0] == "--throughput":
         print(f"guided transitions/s (jobs x transitions per second), torch threads={torch.get_num_threads()}")
         print("\n".join(throughput()))
+        return
+    if argv and argv[0] == "--precision":
+        for a in argv[1:]:
+            print("\n".join(precision(Path(a))) + "\n")
         return
     ckpts = [Path(a) for a in argv] or sorted(p.parent for p in (REPO_ROOT / "checkpoints").glob("*/manifest.json"))
     print("| checkpoint | steps | params | val loss | train h | unguided: no warp / in free cells | "
