@@ -2,6 +2,10 @@
 
     python jobs/bench_speed.py env=pointmaze-medium tasks=[1,2,3,4,5] seeds=[0,1]
     python jobs/bench_speed.py env=pointmaze-giant methods=[mctd,fast-mctd] eval.episode_time_limit=600
+    python jobs/bench_speed.py env=pointmaze-medium seeds=[0,1] store=main   # also keep the rows
+
+With ``store=<run>`` every episode is also written as a result row to ``<eval.out>/<run>/``
+(the same rows jobs/eval.py writes with ``runner=local``), so the maze table can use them.
 
 For each method (default: mctd, p-mctd, s-mctd, fast-mctd, diffuser) every episode is run in this
 process with a LocalDenoiser on that method's checkpoint, interleaved per episode so load
@@ -24,6 +28,8 @@ from fmctd_dist.denoiser.local import LocalDenoiser
 from fmctd_dist.diffusion.checkpoint import load_checkpoint, normaliser_from_manifest
 from fmctd_dist.envs import make_env
 from fmctd_dist.evaluation.episode import describe, run_episode
+from fmctd_dist.evaluation.grid import prepare, provenance
+from fmctd_dist.evaluation.results import ResultStore
 from fmctd_dist.planners import make_planner
 
 DEFAULT_METHODS = ["mctd", "p-mctd", "s-mctd", "fast-mctd", "diffuser"]
@@ -31,21 +37,25 @@ DEFAULT_METHODS = ["mctd", "p-mctd", "s-mctd", "fast-mctd", "diffuser"]
 
 def build(method: str, overrides: list[str]):
     cfg = load_config(overrides + [f"method={method}"])
-    model, manifest = load_checkpoint(cfg.checkpoint_dir(), cfg)
+    prepared = prepare(cfg)  # device, checkpoint present and uncorrupted
+    model, manifest = load_checkpoint(prepared.checkpoint, cfg)
     denoiser = LocalDenoiser(model, cfg.diffusion, cfg.device, cfg.ray.micro_batch, manifest["digest"])
-    return cfg, make_planner(cfg, denoiser, normaliser_from_manifest(manifest), cfg.eval.episode_time_limit)
+    return cfg, make_planner(cfg, denoiser, normaliser_from_manifest(manifest), cfg.eval.episode_time_limit), prepared
 
 
 def main(argv: list[str]) -> int:
     methods = DEFAULT_METHODS
-    rest = []
+    rest, store = [], None
     for a in argv:
         if a.startswith("methods="):
             methods = [m.strip() for m in a.split("=", 1)[1].strip("[]").split(",") if m.strip()]
+        elif a.startswith("store="):
+            store = a.split("=", 1)[1]
         else:
             rest.append(a)
     setups = {m: build(m, rest) for m in methods}  # every config and checkpoint checked up front
     cfg0 = next(iter(setups.values()))[0]
+    results = ResultStore(cfg0.eval.out, store) if store else None
     if cfg0.eval.threads > 0:
         torch.set_num_threads(cfg0.eval.threads)
     env = make_env(cfg0.env.name, cfg0.env.protocol)
@@ -53,9 +63,11 @@ def main(argv: list[str]) -> int:
     t0 = time.time()
     for task in cfg0.eval.tasks:
         for seed in cfg0.eval.seeds:
-            for m, (cfg, planner) in setups.items():
+            for m, (cfg, planner, prepared) in setups.items():
                 row = run_episode(cfg, env, planner, task, seed)
                 rows[m].append(row)
+                if results is not None:
+                    results.write({**row, **provenance(prepared, 0)})
                 print(describe(row), flush=True)
     ref = "fast-mctd" if "fast-mctd" in rows else methods[-1]
     ref_time = np.mean([r["plan_time_s"] for r in rows[ref]])
@@ -66,7 +78,9 @@ def main(argv: list[str]) -> int:
     for m, rs in rows.items():
         t = np.array([r["plan_time_s"] for r in rs])
         share = np.sum([r["denoise_time_s"] for r in rs]) / max(t.sum(), 1e-12)
-        print(f"| {m} | {100 * np.mean([r['success'] for r in rs]):.0f} | {t.mean():.2f} ± {t.std():.2f} | "
+        timed_out = sum(r["timed_out"] for r in rs)
+        print(f"| {m} | {100 * np.mean([r['success'] for r in rs]):.0f}{f' ({timed_out} timed out)' if timed_out else ''} | "
+              f"{t.mean():.2f} ± {t.std():.2f} | "
               f"{t.mean() / ref_time:.1f}x | {100 * share:.1f}% | {np.mean([r['expansions'] for r in rs]):.0f} | "
               f"{np.mean([r['iterations'] for r in rs]):.1f} |")
     return 0
