@@ -1,5 +1,7 @@
-"""End to end with a shipped checkpoint: Fast-MCTD solves PointMaze-medium task 1, seed 0, on CPU."""
+"""End to end with shipped checkpoints: Fast-MCTD solves PointMaze-medium task 1, seed 0, on CPU;
+the shipped Diffuser's plan for that task is warp-free."""
 
+import numpy as np
 import pytest
 from conftest import torch_threads
 
@@ -22,3 +24,17 @@ def test_fast_mctd_solves_medium_task1_seed0():
     assert row["success"], row["plan_status"]
     assert row["env_steps"] <= 500 and row["plans"] == 1
     assert row["denoise_share"] > 0.9  # the search is almost all denoiser
+
+
+def test_shipped_diffuser_plan_on_medium_task1_is_warp_free():
+    cfg = load_config(["method=diffuser", "env=pointmaze-medium"])
+    model, manifest = load_checkpoint(cfg.checkpoint_dir(), cfg)
+    env = make_env(cfg.env.name)
+    reset = env.reset(1, 0)
+    with torch_threads(1):
+        planner = make_planner(cfg, LocalDenoiser(model, cfg.diffusion, "cpu", 1), normaliser_from_manifest(manifest))
+        out = planner.plan(reset.obs, reset.goal, seed=0)
+    path = np.concatenate([reset.obs[None], out.waypoints])
+    steps = np.linalg.norm(np.diff(path, axis=0), axis=1)
+    assert out.waypoints.shape == (cfg.env.horizon, 2)
+    assert steps.max() <= cfg.method.warp_threshold, f"largest plan step {steps.max():.2f} at {steps.argmax()}"

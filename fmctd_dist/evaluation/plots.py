@@ -42,14 +42,14 @@ def plot_episode(row: dict[str, Any], geo: MazeGeometry, path: Path) -> Path:
     plan = np.asarray(row["plan_xy"]).reshape(-1, 2)
     traj = np.asarray(row["traj_xy"]).reshape(-1, 2)
     task = geo.task(row["task"])
-    ax.plot(plan[:, 0], plan[:, 1], "--", color="tab:blue", lw=1.2, label="plan")
-    ax.plot(traj[:, 0], traj[:, 1], "-", color="tab:orange", lw=1.5, label="executed")
+    ax.plot(traj[:, 0], traj[:, 1], "-", color="tab:orange", lw=2.5, alpha=0.6, label="executed", zorder=2)
+    ax.plot(plan[:, 0], plan[:, 1], "--", color="tab:blue", lw=1.0, label="plan", zorder=3)
     ax.plot(*traj[0], "o", color="tab:green", ms=8, label="start")
     ax.plot(*task.goal_xy, "*", color="tab:red", ms=14, label="goal")
     outcome = "success" if row["success"] else "failure"
     ax.set_title(f"{row['method']} {row['env']} task {row['task']} seed {row['seed']}: {outcome}, "
                  f"{row['plan_time_s']:.1f}s planning", fontsize=8)
-    ax.legend(loc="lower right", fontsize=7)
+    ax.legend(loc="best", fontsize=7, framealpha=0.8)
     return _save(fig, path)
 
 
