@@ -83,8 +83,12 @@ def test_eval_job_writes_rows_and_resumes(tiny_checkpoint, tmp_path):
     row = pq.read_table(files[0]).to_pylist()[0]
     for key in ("method", "env", "task", "seed", "success", "env_steps", "plan_time_s", "denoise_time_s",
                 "overhead_s", "expansions", "iterations", "retries", "n_denoiser_actors", "device", "git_sha",
-                "checkpoint_digest", "config_hash"):
+                "checkpoint_digest", "config_hash", "denoise_call_s", "call_share"):
         assert key in row
+    # the search knobs the ablation tables group by are recorded, with this run's values
+    assert (row["parallel"], row["virtual_weight"], row["redundancy_aware"], row["leaf_parallel"], row["jump"]) == \
+        (8, 1.0, True, False, 1)
+    assert row["denoise_time_s"] <= row["denoise_call_s"] <= row["plan_time_s"]
     mtimes = [f.stat().st_mtime_ns for f in files]
     second = run_eval(args[:-1] + ["seeds=[0,1]"])  # resume: only the two new keys run
     assert second.returncode == 0, second.stderr
