@@ -26,6 +26,11 @@ def test_fast_mctd_solves_medium_task1_seed0():
     assert row["denoise_share"] > 0.9  # the search is almost all denoiser
 
 
+DIFFUSER_MEDIUM = load_config(["method=diffuser", "env=pointmaze-medium"]).checkpoint_dir()
+
+
+@pytest.mark.skipif(not (DIFFUSER_MEDIUM / "manifest.json").is_file(),
+                    reason="no shipped pointmaze-medium-diffuser checkpoint yet (issue 7: its plans ignore the start)")
 def test_shipped_diffuser_plan_on_medium_task1_is_warp_free():
     cfg = load_config(["method=diffuser", "env=pointmaze-medium"])
     model, manifest = load_checkpoint(cfg.checkpoint_dir(), cfg)
