@@ -78,12 +78,14 @@ def quality(ckpt: Path) -> dict:
     return row
 
 
-def precision(ckpt: Path, batch: int = 64, timesteps=(19, 99, 299)) -> list[str]:
+def precision(ckpt: Path, batch: int = 64, timesteps: tuple[int, ...] = ()) -> list[str]:
     """x0-prediction error on validation windows noised to a few timesteps, in world units.
 
     Splits plan steps into token-boundary steps (last frame of a token -> first of the next)
     and steps inside a token: a model whose error is a per-token offset makes smooth tokens
-    that do not join up, i.e. warps at every 10th frame.
+    that do not join up, i.e. warps at every 10th frame. Also: the error at the first and the
+    last plan frame against the middle one, and how far the first plan frames move when the
+    clean start token moves by one normalised unit (a model that ignores its start: ~0).
     """
     from fmctd_dist.data.dataset import load_dataset
     from fmctd_dist.data.tokens import tokens_to_frames
@@ -96,20 +98,26 @@ def precision(ckpt: Path, batch: int = 64, timesteps=(19, 99, 299)) -> list[str]
     data = train_data(cfg, load_dataset(cfg))
     x = torch.as_tensor(data.val_batches(1, batch)[0])
     fs, std = cfg.model.frame_stack, data.normaliser.std
-    ab = torch.as_tensor(alphas_cumprod(make_betas(cfg.diffusion.beta_schedule, cfg.diffusion.timesteps)),
+    dc = cfg.diffusion
+    ab = torch.as_tensor(alphas_cumprod(make_betas(dc.beta_schedule, dc.timesteps, dc.beta_start, dc.beta_end)),
                          dtype=torch.float32)
-    stab = cfg.diffusion.stabilization - 1
+    stab = dc.stabilization - 1
+    timesteps = timesteps or tuple(int(f * dc.timesteps) - 1 for f in (0.02, 0.1, 0.3))
 
-    def steps(tok):  # -> (boundary steps, inside-token steps) in world units
-        st = np.linalg.norm(np.diff(tokens_to_frames(tok[:, 1:].numpy(), fs) * std, axis=1), axis=-1)
+    def frames(tok):  # [B, F, 2] world-unit plan frames (scaled, not shifted: differences only)
+        return tokens_to_frames(tok[:, 1:].numpy(), fs) * std
+
+    def steps(tok):  # -> (boundary steps, inside-token steps); with one frame per token all are boundaries
+        st = np.linalg.norm(np.diff(frames(tok), axis=1), axis=-1)
         at_boundary = (np.arange(st.shape[1]) + 1) % fs == 0
-        return st[:, at_boundary], st[:, ~at_boundary]
+        return st[:, at_boundary], st[:, ~at_boundary] if fs > 1 else st[:, at_boundary]
 
     b, i = steps(x)
     lines = [f"{ckpt.name}: {batch} validation windows; data steps: boundary mean {b.mean():.3f} max {b.max():.3f}, "
              f"inside mean {i.mean():.3f} max {i.max():.3f}",
-             "| timestep | x0 RMS error (world) | identity RMS error | boundary step mean / max | inside step mean / max |",
-             "|---|---|---|---|---|"]
+             "| timestep | x0 RMS error | identity RMS error | error at first / middle / last frame | "
+             "boundary step mean / max | inside step mean / max | first frames per unit of start |",
+             "|---|---|---|---|---|---|---|"]
     gen = torch.Generator().manual_seed(0)
     for t in timesteps:
         tt = torch.full(x.shape[:2], t)
@@ -117,15 +125,18 @@ def precision(ckpt: Path, batch: int = 64, timesteps=(19, 99, 299)) -> list[str]
         a = ab[tt][..., None]
         xn = a.sqrt() * x + (1 - a).sqrt() * torch.randn(x.shape, generator=gen)
         xn[:, 0] = ab[stab].sqrt() * x[:, 0]  # the clean context, as the sampler feeds it
+        moved = xn.clone()
+        moved[:, 0] += 1.0
         with torch.no_grad():
-            x0 = model(xn, tt)
-
-        def rms(err):
-            return float(np.sqrt(((err[:, 1:].reshape(batch, -1, 2).numpy() * std) ** 2).sum(-1).mean()))
-
+            x0, x0_moved = model(xn, tt), model(moved, tt)
+        err = np.linalg.norm(frames(x0) - frames(x), axis=-1)  # [B, F]
+        per_frame = np.sqrt((err ** 2).mean(0))
+        ident = np.linalg.norm(frames(xn / a.sqrt()) - frames(x), axis=-1)
+        sens = float((x0_moved - x0)[:, 1, :].abs().mean())  # first plan token, normalised units
         b, i = steps(x0)
-        lines.append(f"| {t} | {rms(x0 - x):.3f} | {rms(xn / a.sqrt() - x):.3f} | {b.mean():.3f} / {b.max():.2f} | "
-                     f"{i.mean():.3f} / {i.max():.2f} |")
+        lines.append(f"| {t} | {np.sqrt((err ** 2).mean()):.3f} | {np.sqrt((ident ** 2).mean()):.3f} | "
+                     f"{per_frame[0]:.2f} / {per_frame[len(per_frame) // 2]:.2f} / {per_frame[-1]:.2f} | "
+                     f"{b.mean():.3f} / {b.max():.2f} | {i.mean():.3f} / {i.max():.2f} | {sens:.3f} |")
     return lines
 
 
