@@ -55,22 +55,24 @@ def plot_episode(row: dict[str, Any], geo: MazeGeometry, path: Path) -> Path:
 
 def plot_success_vs_time(summary: list[dict[str, Any]], path: Path) -> Path:
     """The paper's Figure 1 style: one point per (method, env), error bars over seeds."""
-    fig, ax = plt.subplots(figsize=(6, 4))
+    fig, ax = plt.subplots(figsize=(8, 4))
     envs = sorted({s["env"] for s in summary})
     markers = dict(zip(envs, "osD^v"))
+    methods = sorted({s["method"] for s in summary})
+    colors = {m: plt.get_cmap("tab10")(i % 10) for i, m in enumerate(methods)}  # one colour per method
     for s in summary:
         ax.errorbar(s["plan_time_s"], s["success"], xerr=s["plan_time_std"], yerr=s["success_std"],
-                    marker=markers[s["env"]], capsize=3, ls="none")
-        ax.annotate(f"{s['method']}", (s["plan_time_s"], s["success"]), fontsize=7, xytext=(4, 4),
-                    textcoords="offset points")
+                    marker=markers[s["env"]], color=colors[s["method"]], capsize=3, ls="none")
+    for m in methods:
+        ax.plot([], [], "s", color=colors[m], label=m)
     for env in envs:
-        ax.plot([], [], markers[env], color="k", label=env)
+        ax.plot([], [], markers[env], color="k", mfc="none", label=env.replace("pointmaze-", ""))
     ax.set_xscale("log")
     ax.set_xlabel("planning time per episode (s, log)")
     ax.set_ylabel("success (%)")
     ax.set_ylim(-5, 105)
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=7)
+    ax.legend(fontsize=7, ncol=2, loc="center left", bbox_to_anchor=(1.01, 0.5))
     return _save(fig, path)
 
 
