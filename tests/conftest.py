@@ -78,7 +78,8 @@ def tiny_args(data_root, ckpt) -> list[str]:
 def ray_cluster():
     """ONE local Ray cluster for every ``@pytest.mark.ray`` test (2 logical CPUs, no dashboard).
 
-    Token auth is off for this private test cluster (RAY_AUTH_MODE=disabled), so a stale
+    Always a fresh private cluster (address="local"), even when a `ray start` cluster runs on
+    the machine. Token auth is off for it (RAY_AUTH_MODE=disabled), so a stale
     ~/.ray/auth_token from another run cannot break it. Yields the cluster's address, which
     subprocess tests pass on as RAY_ADDRESS.
     """
@@ -88,7 +89,7 @@ def ray_cluster():
 
     before = os.environ.get("RAY_AUTH_MODE")
     os.environ["RAY_AUTH_MODE"] = "disabled"
-    ray.init(num_cpus=2, include_dashboard=False, logging_level=logging.ERROR, log_to_driver=False)
+    ray.init(address="local", num_cpus=2, include_dashboard=False, logging_level=logging.ERROR, log_to_driver=False)
     yield ray.get_runtime_context().gcs_address
     ray.shutdown()
     if before is None:
