@@ -35,3 +35,13 @@ def resolve_device(name: str) -> torch.device:
     raise DeviceError(
         f"device={name!r} is not known{did_you_mean(name, DEVICES)}; choose one of: {', '.join(DEVICES)}"
     )
+
+
+def set_threads(n: int) -> None:
+    """Torch intra-op threads for this process; 0 keeps torch's default (one per core).
+
+    On a machine whose cores are busy with other jobs, torch's spinning threads make every
+    call several times slower: jobs take ``train.threads`` / ``eval.threads`` = 1 there.
+    """
+    if n > 0:
+        torch.set_num_threads(n)

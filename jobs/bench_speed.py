@@ -25,6 +25,7 @@ import torch
 from fmctd_dist.cli import run
 from fmctd_dist.config import load_config
 from fmctd_dist.denoiser.local import LocalDenoiser
+from fmctd_dist.device import set_threads
 from fmctd_dist.diffusion.checkpoint import load_checkpoint, normaliser_from_manifest
 from fmctd_dist.envs import make_env
 from fmctd_dist.evaluation.episode import describe, run_episode
@@ -56,8 +57,7 @@ def main(argv: list[str]) -> int:
     setups = {m: build(m, rest) for m in methods}  # every config and checkpoint checked up front
     cfg0 = next(iter(setups.values()))[0]
     results = ResultStore(cfg0.eval.out, store) if store else None
-    if cfg0.eval.threads > 0:
-        torch.set_num_threads(cfg0.eval.threads)
+    set_threads(cfg0.eval.threads)
     env = make_env(cfg0.env.name, cfg0.env.protocol)
     rows: dict[str, list[dict]] = {m: [] for m in methods}
     t0 = time.time()

@@ -59,7 +59,7 @@ def main(argv: list[str]) -> int:
                 plot_episode(rs[0], maze_geometry(env), figures / f"plan_{env}.png")
 
     for ab in ABLATIONS:
-        rows = load_rows(root, ab.prefix)
+        rows = load_rows(root, ab.name)
         all_rows += rows
         if rows:
             sections[ab.name] = ablation_table(ab, rows)

@@ -46,6 +46,8 @@ def test_round_trip_dict():
         (["method.planner=beam"], "method.planner"),
         (["horizon"], "key=value"),
         (["data.train_window=450", "env.horizon=500"], "data.train_window"),
+        (["eval.threads=-1"], "eval.threads"),
+        (["train.threads=-2"], "train.threads"),
     ],
 )
 def test_bad_config_names_the_field(args, field):

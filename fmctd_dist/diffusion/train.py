@@ -21,7 +21,7 @@ from tqdm import tqdm
 
 from fmctd_dist.config import REPO_ROOT, Config
 from fmctd_dist.data.tokens import Normaliser
-from fmctd_dist.device import resolve_device
+from fmctd_dist.device import resolve_device, set_threads
 from fmctd_dist.diffusion.checkpoint import (
     check_compatible, load_checkpoint, load_train_state, module_state, save_checkpoint, save_train_state,
 )
@@ -143,8 +143,7 @@ def validation_loss(model: DFTransformer, loss_fn: DFLoss, batches: list[torch.T
 def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool = True) -> dict[str, Any]:
     """Train (or resume) the cfg.model.kind model into out_dir; returns the summary written to the manifest."""
     device = resolve_device(cfg.device)
-    if cfg.train.threads > 0:
-        torch.set_num_threads(cfg.train.threads)
+    set_threads(cfg.train.threads)
     out_dir = Path(out_dir)
     tc = cfg.train
 

@@ -16,7 +16,7 @@ from typing import Any, Callable
 from tqdm.auto import tqdm
 
 from fmctd_dist.config import Config
-from fmctd_dist.device import resolve_device
+from fmctd_dist.device import resolve_device, set_threads
 from fmctd_dist.diffusion.checkpoint import read_manifest, sha256_file
 from fmctd_dist.diffusion.train import git_sha
 from fmctd_dist.errors import CheckpointError
@@ -85,10 +85,7 @@ def run_local(p: Prepared, store: ResultStore, progress: bool = True,
     todo = missing(cfg, store)
     if not todo:
         return []
-    if cfg.eval.threads > 0:
-        import torch
-
-        torch.set_num_threads(cfg.eval.threads)
+    set_threads(cfg.eval.threads)
     denoiser = LocalDenoiser.from_checkpoint(p.checkpoint, cfg, expect_digest=p.checkpoint_digest)
     manifest = read_manifest(p.checkpoint)
     planner = make_planner(cfg, denoiser, normaliser_from_manifest(manifest), cfg.eval.episode_time_limit)

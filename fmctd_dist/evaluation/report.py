@@ -27,25 +27,24 @@ ENV_ORDER = ["pointmaze-medium", "pointmaze-large", "pointmaze-giant"]
 
 @dataclass(frozen=True)
 class Ablation:
-    """One ablation table: runs under ``prefix``, grouped by the row field ``knob``."""
+    """One ablation table: the runs ``<name>/*``, grouped by the row field ``knob``; ``name`` is
+    also its marker in docs/results.md and its figure's file name."""
 
     name: str
-    title: str
-    prefix: str
     knob: str
     default: Any  # Fast-MCTD's setting: the row the "time / default" column divides by
     paper: dict[Any, str]  # knob value -> the paper's cell (P-MCTD, PointMaze-giant)
 
 
 ABLATIONS = [
-    Ablation("ablate-w", "virtual-visit weight w", "ablate-w", "virtual_weight", 1.0,
+    Ablation("ablate-w", "virtual_weight", 1.0,
              {0.0: "221.3 ± 109.6 s", 0.1: "14.0 ± 2.5 s", 1.0: "12.8 ± 2.3 s", 5.0: "12.5 ± 2.1 s"}),
-    Ablation("ablate-ras", "redundancy-aware selection", "ablate-ras", "redundancy_aware", True,
+    Ablation("ablate-ras", "redundancy_aware", True,
              {True: "12.8 ± 2.5 s", False: "18.4 ± 0.9 s"}),
-    Ablation("ablate-leaf", "leaf parallelization", "ablate-leaf", "leaf_parallel", False,
+    Ablation("ablate-leaf", "leaf_parallel", False,
              {False: "100 ± 0 / 12.8 ± 2.5 s", True: "100 ± 0 / 17.0 ± 2.8 s"}),
-    Ablation("ablate-k", "parallelism K", "ablate-k", "parallel", 200, {}),  # paper: a figure, no numbers
-    Ablation("ablate-h", "interval H", "ablate-h", "jump", 5, {}),
+    Ablation("ablate-k", "parallel", 200, {}),  # paper: a figure, no numbers
+    Ablation("ablate-h", "jump", 5, {}),
 ]
 
 
@@ -74,14 +73,12 @@ def maze_table(rows: list[dict[str, Any]]) -> str:
     """The paper's Table "Maze results": one line per (method, env) in the paper's order."""
     summary = summarise(rows)
     key = {(s["method"], s["env"]): s for s in summary}
-    lines = ["| method | env | episodes (tasks x seeds) | success (%) | planning time (s) | in denoiser: compute / calls | "
-             "success per task | paper: success / time (GPU) |", "|---|---|---|---|---|---|---|---|"]
     # "in denoiser": share of planning time spent computing inside denoiser actors / inside denoiser calls
     # (the latter adds queueing behind other env actors and Ray transport; "–" for rows recorded before it existed)
-    envs = ENV_ORDER
-    methods = METHOD_ORDER
-    for env in envs:
-        for m in methods:
+    lines = ["| method | env | episodes (tasks x seeds) | success (%) | planning time (s) | in denoiser: compute / calls | "
+             "success per task | paper: success / time (GPU) |", "|---|---|---|---|---|---|---|---|"]
+    for env in ENV_ORDER:
+        for m in METHOD_ORDER:
             s = key.get((m, env))
             if s is None:
                 lines.append(f"| {m} | {env} | not run | | | | | {paper_cell(m, env)} |")
