@@ -201,13 +201,14 @@ def resolve_path(p: str | Path) -> Path:
     return p if p.is_absolute() else REPO_ROOT / p
 
 
-def _all_keys(node: Any, prefix: str = "") -> list[str]:
+def all_keys(node: Any, prefix: str = "") -> list[str]:
+    """Every dotted leaf key of a dataclass config instance (what an override may name)."""
     keys = []
     for f in dataclasses.fields(node):
         value = getattr(node, f.name)
         name = f"{prefix}{f.name}"
         if dataclasses.is_dataclass(value):
-            keys.extend(_all_keys(value, name + "."))
+            keys.extend(all_keys(value, name + "."))
         else:
             keys.append(name)
     return keys
@@ -224,20 +225,36 @@ def _group_file(group: str, name: str) -> Any:
     return OmegaConf.load(path)
 
 
-def _merge(base: Any, update: Any, where: str) -> Any:
+def merge_checked(base: Any, update: Any, where: str, schema: Any = None) -> Any:
+    """OmegaConf.merge; a bad key or type becomes one ConfigError naming the key (and its type).
+
+    ``schema`` is the dataclass instance the keys come from (default: ``Config()``).
+    """
     try:
         return OmegaConf.merge(base, update)
     except OmegaConfBaseException as e:
+        schema = Config() if schema is None else schema
         key = getattr(e, "full_key", "") or ""
         msg = str(getattr(e, "msg", e)).splitlines()[0]
-        valid = _all_keys(Config())
+        valid = all_keys(schema)
         if key in valid:
-            raise ConfigError(f"{where}: {key}: {msg}; expected {_type_name(key)}") from None
+            raise ConfigError(f"{where}: {key}: {msg}; expected {_type_name(schema, key)}") from None
         raise ConfigError(f"{where}: unknown config key {key!r}{did_you_mean(key, valid)}") from None
 
 
-def _type_name(dotted: str) -> str:
-    node: Any = Config()
+def apply_override(cfg: Any, key: str, value: str, schema: Any = None) -> Any:
+    """Merge one dotted ``key=value`` into ``cfg``, the value typed as YAML (``1`` int, ``[1,2]`` list)."""
+    try:
+        parsed = OmegaConf.create({"v": OmegaConf.from_dotlist([f"v={value}"]).v}).v
+    except OmegaConfBaseException as e:
+        raise ConfigError(f"{key}={value!r} could not be parsed: {e}") from None
+    upd = OmegaConf.create()
+    OmegaConf.update(upd, key, parsed, force_add=True)
+    return merge_checked(cfg, upd, f"override {key}={value}", schema)
+
+
+def _type_name(schema: Any, dotted: str) -> str:
+    node: Any = schema
     *parents, leaf = dotted.split(".")
     for part in parents:
         node = getattr(node, part)
@@ -249,7 +266,7 @@ def parse_overrides(args: list[str]) -> tuple[dict[str, str], list[tuple[str, st
     """Split CLI words into group selections (env=..., method=...) and dotted overrides."""
     groups: dict[str, str] = {}
     dotted: list[tuple[str, str]] = []
-    valid = _all_keys(Config())
+    valid = all_keys(Config())
     for arg in args:
         if "=" not in arg:
             raise ConfigError(f"override {arg!r} is not key=value; e.g. env=pointmaze-giant or train.max_steps=200")
@@ -272,16 +289,10 @@ def load_config(args: list[str] | None = None, *, env: str = "pointmaze-medium",
     """
     groups, dotted = parse_overrides(list(args or []))
     cfg = OmegaConf.structured(Config)
-    cfg = _merge(cfg, _group_file("env", groups.get("env", env)), "configs/env")
-    cfg = _merge(cfg, _group_file("method", groups.get("method", method)), "configs/method")
+    cfg = merge_checked(cfg, _group_file("env", groups.get("env", env)), "configs/env")
+    cfg = merge_checked(cfg, _group_file("method", groups.get("method", method)), "configs/method")
     for key, value in dotted:
-        try:
-            parsed = OmegaConf.create({"v": OmegaConf.from_dotlist([f"v={value}"]).v}).v  # YAML-typed value
-        except OmegaConfBaseException as e:
-            raise ConfigError(f"{key}={value!r} could not be parsed: {e}") from None
-        upd = OmegaConf.create()
-        OmegaConf.update(upd, key, parsed, force_add=True)
-        cfg = _merge(cfg, upd, f"override {key}={value}")
+        cfg = apply_override(cfg, key, value)
     obj: Config = OmegaConf.to_object(cfg)  # type: ignore[assignment]
     validate(obj)
     return obj
@@ -289,7 +300,7 @@ def load_config(args: list[str] | None = None, *, env: str = "pointmaze-medium",
 
 def config_from_dict(d: dict[str, Any]) -> Config:
     """Rebuild a Config from ``Config.to_dict()`` output (checkpoint manifests, Ray payloads)."""
-    cfg = _merge(OmegaConf.structured(Config), OmegaConf.create(d), "config dict")
+    cfg = merge_checked(OmegaConf.structured(Config), OmegaConf.create(d), "config dict")
     return OmegaConf.to_object(cfg)  # type: ignore[return-value]
 
 

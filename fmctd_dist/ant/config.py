@@ -15,9 +15,8 @@ from pathlib import Path
 from typing import Any
 
 from omegaconf import OmegaConf
-from omegaconf.errors import OmegaConfBaseException
 
-from fmctd_dist.config import resolve_path
+from fmctd_dist.config import all_keys, apply_override, merge_checked, resolve_path
 from fmctd_dist.errors import ConfigError, did_you_mean
 
 DEFAULT_OUT = "runs/ant-expert"
@@ -84,32 +83,9 @@ class AntExpertConfig:
         return dataclasses.asdict(self)
 
 
-def _all_keys(node: Any, prefix: str = "") -> list[str]:
-    keys = []
-    for f in dataclasses.fields(node):
-        value = getattr(node, f.name)
-        if dataclasses.is_dataclass(value):
-            keys.extend(_all_keys(value, f"{prefix}{f.name}."))
-        else:
-            keys.append(f"{prefix}{f.name}")
-    return keys
-
-
-def _merge(base: Any, update: Any, where: str) -> Any:
-    try:
-        return OmegaConf.merge(base, update)
-    except OmegaConfBaseException as e:
-        key = getattr(e, "full_key", "") or ""
-        msg = str(getattr(e, "msg", e)).splitlines()[0]
-        valid = _all_keys(AntExpertConfig())
-        if key in valid:
-            raise ConfigError(f"{where}: {key}: {msg}") from None
-        raise ConfigError(f"{where}: unknown config key {key!r}{did_you_mean(key, valid)}") from None
-
-
 def load_expert_config(args: list[str] | None = None) -> AntExpertConfig:
     """Defaults, then dotted ``key=value`` overrides in the order given; validated."""
-    valid = _all_keys(AntExpertConfig())
+    valid = all_keys(AntExpertConfig())
     cfg = OmegaConf.structured(AntExpertConfig)
     for arg in args or []:
         if "=" not in arg:
@@ -117,13 +93,7 @@ def load_expert_config(args: list[str] | None = None) -> AntExpertConfig:
         key, value = (s.strip() for s in arg.split("=", 1))
         if key not in valid:
             raise ConfigError(f"unknown config key {key!r}{did_you_mean(key, valid)}")
-        try:
-            parsed = OmegaConf.from_dotlist([f"v={value}"]).v
-        except OmegaConfBaseException as e:
-            raise ConfigError(f"{key}={value!r} could not be parsed: {e}") from None
-        upd = OmegaConf.create()
-        OmegaConf.update(upd, key, parsed, force_add=True)
-        cfg = _merge(cfg, upd, f"override {key}={value}")
+        cfg = apply_override(cfg, key, value, AntExpertConfig())
     obj: AntExpertConfig = OmegaConf.to_object(cfg)  # type: ignore[assignment]
     validate_expert(obj)
     return obj
@@ -131,7 +101,7 @@ def load_expert_config(args: list[str] | None = None) -> AntExpertConfig:
 
 def expert_config_from_dict(d: dict[str, Any]) -> AntExpertConfig:
     """Rebuild a config from ``to_dict()`` output (manifests, train states)."""
-    cfg = _merge(OmegaConf.structured(AntExpertConfig), OmegaConf.create(d), "config dict")
+    cfg = merge_checked(OmegaConf.structured(AntExpertConfig), OmegaConf.create(d), "config dict", AntExpertConfig())
     return OmegaConf.to_object(cfg)  # type: ignore[return-value]
 
 

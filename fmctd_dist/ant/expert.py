@@ -11,7 +11,6 @@ field and the fix.
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 from typing import Any
 
@@ -21,7 +20,7 @@ import torch
 from fmctd_dist.ant.config import DEFAULT_OUT, expert_config_from_dict
 from fmctd_dist.ant.direction_env import ACT_DIM, OBS_DIM, PROPRIO_DIM
 from fmctd_dist.ant.sac import Actor
-from fmctd_dist.diffusion.checkpoint import module_state, sha256_file
+from fmctd_dist.diffusion.checkpoint import atomic_torch_save, module_state, sha256_file, write_manifest
 from fmctd_dist.errors import CheckpointError
 
 MODEL_FILE = "model.pt"
@@ -33,34 +32,19 @@ OBS_LAYOUT = (f"[{OBS_DIM}] = OGBench ant qpos[2:] + qvel ({PROPRIO_DIM}, the 29
 TRAIN_FIX = f"train one with `python jobs/train_expert.py expert.out={DEFAULT_OUT}`"
 
 
-def _atomic_write(path: Path, write: Any) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    write(tmp)
-    os.replace(tmp, path)
-
-
 def save_expert(out_dir: str | Path, actor: Actor, fields: dict[str, Any]) -> dict[str, Any]:
     """Write model.pt then manifest.json; ``fields`` must hold ``config`` (AntExpertConfig.to_dict())."""
     if "config" not in fields:
         raise ValueError("fields needs 'config' (AntExpertConfig.to_dict())")
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    _atomic_write(out_dir / MODEL_FILE, lambda p: torch.save(module_state(actor), p))
+    atomic_torch_save(module_state(actor), out_dir / MODEL_FILE)
     sha = sha256_file(out_dir / MODEL_FILE)
     manifest = {**fields, "kind": KIND, "format": FORMAT_VERSION, "obs_dim": actor.obs_dim, "act_dim": actor.act_dim,
                 "obs_layout": OBS_LAYOUT, "param_count": sum(p.numel() for p in actor.parameters()),
                 "model_sha256": sha, "digest": sha[:16]}
-    text = json.dumps(manifest, indent=2, sort_keys=True, default=_json_default) + "\n"
-    _atomic_write(out_dir / MANIFEST_FILE, lambda p: p.write_text(text))
+    write_manifest(manifest, out_dir / MANIFEST_FILE)
     return manifest
-
-
-def _json_default(o: Any) -> Any:
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, np.generic):
-        return o.item()
-    raise TypeError(f"{type(o).__name__} is not JSON serialisable")
 
 
 def read_expert_manifest(ckpt_dir: str | Path) -> dict[str, Any]:

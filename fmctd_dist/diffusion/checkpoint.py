@@ -45,15 +45,17 @@ def sha256_file(path: str | Path) -> str:
     return h.hexdigest()
 
 
-def _atomic_torch_save(obj: Any, path: Path) -> None:
+def atomic_torch_save(obj: Any, path: Path) -> None:
+    """Write then rename: a reader (or a killed writer) never sees half a file."""
     tmp = path.with_name(path.name + ".tmp")
     torch.save(obj, tmp)
     os.replace(tmp, path)
 
 
-def _atomic_write_text(text: str, path: Path) -> None:
+def write_manifest(manifest: dict[str, Any], path: Path) -> None:
+    """Sorted, indented JSON (numpy values as plain numbers), written atomically."""
     tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text)
+    tmp.write_text(json.dumps(manifest, indent=2, sort_keys=True, default=_json_default) + "\n")
     os.replace(tmp, path)
 
 
@@ -69,7 +71,7 @@ def save_checkpoint(ckpt_dir: str | Path, model: DFTransformer, manifest_fields:
         raise ValueError("manifest_fields needs 'config' (Config.to_dict())")
     ckpt_dir = Path(ckpt_dir)
     ckpt_dir.mkdir(parents=True, exist_ok=True)
-    _atomic_torch_save(module_state(model), ckpt_dir / MODEL_FILE)
+    atomic_torch_save(module_state(model), ckpt_dir / MODEL_FILE)
     sha = sha256_file(ckpt_dir / MODEL_FILE)
     manifest = {
         **manifest_fields,
@@ -81,8 +83,7 @@ def save_checkpoint(ckpt_dir: str | Path, model: DFTransformer, manifest_fields:
         "model_sha256": sha,
         "digest": sha[:16],
     }
-    _atomic_write_text(json.dumps(manifest, indent=2, sort_keys=True, default=_json_default) + "\n",
-                       ckpt_dir / MANIFEST_FILE)
+    write_manifest(manifest, ckpt_dir / MANIFEST_FILE)
     return manifest
 
 
@@ -184,7 +185,7 @@ def save_train_state(ckpt_dir: str | Path, state: dict[str, Any]) -> None:
     """Write train_state.pt (model + optimiser state, step, RNG states as tensors/plain types)."""
     ckpt_dir = Path(ckpt_dir)
     ckpt_dir.mkdir(parents=True, exist_ok=True)
-    _atomic_torch_save(state, ckpt_dir / TRAIN_STATE_FILE)
+    atomic_torch_save(state, ckpt_dir / TRAIN_STATE_FILE)
 
 
 def load_train_state(ckpt_dir: str | Path) -> dict[str, Any] | None:
