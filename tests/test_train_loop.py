@@ -55,6 +55,7 @@ def test_train_resume_continues_from_saved_step(tmp_path):
     model, manifest = load_checkpoint(tmp_path, tiny_cfg(20))
     assert manifest["train_steps"] == 20 and manifest["dataset_digest"] == "fake-digest"
     assert [s for s, _ in manifest["val_history"]] == [10, 20]
+    assert manifest["vs_paper"].startswith("20 of the paper's 200005 steps")  # what was traded, in words
 
     # The optimiser state that resume will restore is the one that was saved.
     opt_saved = saved["optimizer"]["state"]

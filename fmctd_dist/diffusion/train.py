@@ -34,6 +34,9 @@ CONTEXT_T_MAX = 250  # with prob. 0.5 the context token's timestep is resampled 
 MASKED_WEIGHT = 0.05  # loss weight of tokens past the random terminal (they are pure noise)
 VAL_NOISE_SEED = 12345  # fixed noise for validation so losses are comparable across steps
 LOG_EVERY = 10  # steps between progress-bar updates (each one syncs the device)
+# The paper's training (appendix tables "Hyperparameters for the Diffusion Forcing" / "... for the Diffuser").
+PAPER_TRAINING = {"df": {"layers": 12, "batch_size": 1024, "steps": 200_005},
+                  "diffuser": {"batch_size": 32, "steps": 20_000}}
 
 
 class TrainDataLike(Protocol):
@@ -123,6 +126,18 @@ def make_loss(cfg: Config, device: torch.device) -> torch.nn.Module:
     return DiffuserLoss(cfg, device) if cfg.model.kind == "diffuser" else DFLoss(cfg, device)
 
 
+def vs_paper(cfg: Config, step: int) -> str:
+    """One line for the manifest: what this run traded against the paper's training."""
+    paper = PAPER_TRAINING[cfg.model.kind]
+    seen = step * cfg.train.batch_size
+    parts = [f"{step} of the paper's {paper['steps']} steps at batch {cfg.train.batch_size} (paper "
+             f"{paper['batch_size']}): {seen:,} training windows, {100 * seen / (paper['steps'] * paper['batch_size']):.1f}%"
+             " of the paper's"]
+    if "layers" in paper:
+        parts.append(f"{cfg.model.layers} of the paper's {paper['layers']} layers (width {cfg.model.width})")
+    return "; ".join(parts)
+
+
 def lr_at(cfg: Config, step: int) -> float:
     """Linear warm-up over train.warmup steps, then constant."""
     w = cfg.train.warmup
@@ -195,7 +210,7 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
     def save() -> None:
         summary = _summary(step, wall, history, out_dir, model, resumed_from)
         save_checkpoint(out_dir, ema, {**base, "ema_decay": tc.ema_decay, "config": cfg.to_dict(),
-                                       "train_steps": step, "wall_time_s": wall,
+                                       "train_steps": step, "wall_time_s": wall, "vs_paper": vs_paper(cfg, step),
                                        "final_losses": summary["final_losses"], "val_history": history["val"]})
         save_train_state(out_dir, {
             "model": module_state(model), "ema": module_state(ema), "optimizer": opt.state_dict(),
