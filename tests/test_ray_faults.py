@@ -119,11 +119,13 @@ def test_slow_actor_is_rerouted_after_call_timeout(tiny_checkpoint, ray_cluster)
     pool = DenoiserPool.create(p, 1)
     hung = HungActor.remote()
     try:
-        den = RayDenoiser([hung] + pool.actors, 2, call_timeout_s=2.0, max_restarts=0)
+        # The timeout must exceed a healthy call on a loaded 2-core machine (2 s did not, in CI
+        # beside two trainings) and stay far below the hung actor's 600 s.
+        den = RayDenoiser([hung] + pool.actors, 2, call_timeout_s=15.0, max_restarts=0)
         ref, ref_tree = plan(p, LocalDenoiser.from_checkpoint(p.checkpoint, p.cfg))
         t0 = time.monotonic()
         out, tree = plan(p, den)
-        assert out.retries >= 1 and den.live_actors() == 1 and time.monotonic() - t0 < 60
+        assert out.retries >= 1 and den.live_actors() == 1 and time.monotonic() - t0 < 300
         n = ref_tree.num_nodes
         assert np.array_equal(out.waypoints, ref.waypoints) and np.array_equal(tree.x[:n], ref_tree.x[:n])
     finally:
