@@ -15,6 +15,7 @@ search has anything to work with. Throughput: guided DDIM transitions per second
 
 from __future__ import annotations
 
+import json
 import sys
 import time
 from pathlib import Path
@@ -175,7 +176,9 @@ def main(argv: list[str]) -> None:
         for a in argv[1:]:
             print("\n".join(precision(Path(a))) + "\n")
         return
-    ckpts = [Path(a) for a in argv] or sorted(p.parent for p in (REPO_ROOT / "checkpoints").glob("*/manifest.json"))
+    # every shipped planning model (DF or Diffuser); other checkpoints (the ant expert) have no model_kind
+    ckpts = [Path(a) for a in argv] or sorted(p.parent for p in (REPO_ROOT / "checkpoints").glob("*/manifest.json")
+                                              if "model_kind" in json.loads(p.read_text()))
     print("| checkpoint | steps | params | val loss | train h | unguided: no warp / in free cells | "
           "guided: no warp / in free cells / within 2.0 of goal |")
     print("|---|---|---|---|---|---|---|")
