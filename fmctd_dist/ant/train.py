@@ -18,13 +18,13 @@ import numpy as np
 from tqdm import tqdm
 
 from fmctd_dist.ant.config import AntExpertConfig
+from fmctd_dist.config import git_sha
 from fmctd_dist.ant.direction_env import ACT_DIM, OBS_DIM, AntDirectionEnv
 from fmctd_dist.ant.evaluate import evaluate_directions, make_eval_env
 from fmctd_dist.ant.expert import MANIFEST_FILE, read_expert_manifest, save_expert
 from fmctd_dist.ant.sac import SAC, ReplayBuffer
 from fmctd_dist.device import set_threads
 from fmctd_dist.diffusion.checkpoint import load_train_state, save_train_state
-from fmctd_dist.diffusion.train import git_sha
 from fmctd_dist.errors import CheckpointError
 
 RNG_STREAM = 2  # SeedSequence([seed, RNG_STREAM]): random warm-up actions and replay indices

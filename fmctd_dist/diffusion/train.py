@@ -10,7 +10,6 @@ an uninterrupted one produce the same weights (bitwise on CPU).
 from __future__ import annotations
 
 import copy
-import subprocess
 import time
 from pathlib import Path
 from typing import Any, Protocol
@@ -19,7 +18,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from fmctd_dist.config import REPO_ROOT, Config
+from fmctd_dist.config import Config, git_sha
 from fmctd_dist.data.tokens import Normaliser
 from fmctd_dist.device import resolve_device, set_threads
 from fmctd_dist.diffusion.checkpoint import (
@@ -49,14 +48,6 @@ class TrainDataLike(Protocol):
     def sample(self, rng: np.random.Generator, batch: int) -> np.ndarray: ...
 
     def val_batches(self, n: int, batch: int) -> list[np.ndarray]: ...
-
-
-def git_sha() -> str:
-    try:
-        out = subprocess.run(["git", "rev-parse", "HEAD"], cwd=REPO_ROOT, capture_output=True, text=True, timeout=10)
-        return out.stdout.strip() if out.returncode == 0 else "unknown"
-    except (OSError, subprocess.SubprocessError):
-        return "unknown"
 
 
 class DFLoss(torch.nn.Module):

@@ -15,10 +15,9 @@ from typing import Any, Callable
 
 from tqdm.auto import tqdm
 
-from fmctd_dist.config import Config
+from fmctd_dist.config import Config, git_sha
 from fmctd_dist.device import resolve_device, set_threads
 from fmctd_dist.diffusion.checkpoint import read_manifest, sha256_file
-from fmctd_dist.diffusion.train import git_sha
 from fmctd_dist.errors import CheckpointError
 from fmctd_dist.evaluation.episode import describe, run_episode
 from fmctd_dist.evaluation.results import ResultStore
