@@ -25,7 +25,9 @@ REPO_ROOT = Path(__file__).resolve().parent.parent
 CONFIG_DIR = REPO_ROOT / "configs"
 
 MAZES = ("medium", "large", "giant")
-ENV_NAMES = tuple(f"pointmaze-{m}" for m in MAZES)
+POINT_ENVS = tuple(f"pointmaze-{m}" for m in MAZES)
+ANT_ENVS = tuple(f"antmaze-{m}" for m in MAZES)  # data generation only so far (issue 9)
+ENV_NAMES = POINT_ENVS + ANT_ENVS
 TASK_IDS = (1, 2, 3, 4, 5)
 DEVICES = ("cpu", "cuda", "auto")
 RUNNERS = ("local", "ray")
@@ -42,7 +44,7 @@ GROUPS = ("env", "method")
 
 @dataclass
 class EnvConfig:
-    name: str = "pointmaze-medium"  # pointmaze-{medium,large,giant}
+    name: str = "pointmaze-medium"  # pointmaze-{medium,large,giant} | antmaze-{medium,large,giant}
     protocol: str = "fixed"  # fixed: start/goal at cell centres (paper); ogbench: stock +-1 noise
     max_steps: int = 500  # env step budget of one evaluation episode (500/500/1000)
     horizon: int = 500  # planning horizon in env steps; plan frames = horizon / jump
@@ -54,7 +56,8 @@ class DataConfig:
     seed: int = 0  # generator seed: same seed -> same bytes
     episodes: int = 1000  # training episodes (OGBench navigate: 1000, giant 500)
     episode_steps: int = 1001  # steps per episode (OGBench: 1001, giant 2001)
-    noise: float = 0.5  # oracle action noise std (OGBench pointmaze: 0.5)
+    noise: float = 0.5  # action noise std (OGBench: pointmaze oracle 0.5, antmaze expert 0.2)
+    expert: str = "checkpoints/ant-expert"  # antmaze only: the ant expert dir whose actions make the data
     val_fraction: float = 0.1  # extra validation episodes as a fraction of `episodes`
     train_window: int = 500  # raw env steps in one training window (= env.horizon)
 
@@ -195,6 +198,21 @@ class Config:
         """Short hash of the whole config (recorded with every result row)."""
         blob = json.dumps(self.to_dict(), sort_keys=True).encode()
         return hashlib.sha256(blob).hexdigest()[:16]
+
+
+def is_ant(env_name: str) -> bool:
+    """AntMaze (29-D ant state, 8-D torque actions) rather than PointMaze (2-D position and action)."""
+    return env_name in ANT_ENVS
+
+
+def require_planning_env(cfg: "Config", what: str) -> None:
+    """Fail before any actor starts if ``cfg.env`` cannot be planned in yet (AntMaze: no low-level policy)."""
+    if is_ant(cfg.env.name):
+        raise ConfigError(
+            f"antmaze evaluation needs the low-level policy (issue 9); {what} cannot run env.name={cfg.env.name!r} "
+            "yet (a plan over x, y cannot drive the ant). AntMaze works with jobs/make_dataset.py and "
+            "jobs/train.py for now; evaluate a pointmaze-* env"
+        )
 
 
 def git_sha() -> str:
@@ -391,6 +409,9 @@ def validate(cfg: Config) -> None:
     bad_seeds = [s for s in cfg.eval.seeds if not isinstance(s, int) or s < 0]
     if bad_seeds or not cfg.eval.seeds:
         raise ConfigError(f"eval.seeds={cfg.eval.seeds} must be a non-empty list of non-negative integers")
+    if is_ant(cfg.env.name) and not cfg.data.expert.strip():
+        raise ConfigError(f"data.expert is empty but env.name={cfg.env.name} makes its data with the ant expert; "
+                          "set data.expert=checkpoints/ant-expert (or the dir written by jobs/train_expert.py)")
     if cfg.ray.num_gpus > 0 and cfg.device == "cpu":
         raise ConfigError("ray.num_gpus > 0 but device=cpu; set device=cuda (or auto) to plan on GPUs")
 

@@ -1,9 +1,14 @@
-"""Navigate datasets: generate with the noisy oracle, write .npz + manifest, load and verify.
+"""Navigate datasets: generate, write .npz + manifest, load and verify.
 
 Layout: ``<data.root>/<env>-navigate-seed<seed>-<episodes>x<steps>/{train,val}.npz, manifest.json``.
 Same config -> same bytes (per-episode seeds, deterministic npz). Loading verifies every
 manifest field and sha256; a corrupt or mismatched file raises DatasetError and is never
 silently regenerated over.
+
+PointMaze data comes from the noisy BFS oracle (here); AntMaze data from the ant expert
+steered by the same oracle (:mod:`fmctd_dist.data.ant_dataset`). Both share the goal
+logic, the per-episode seeding, the layout and the manifest; loading gives the planner
+x, y observations [E, S, 2] for either.
 """
 
 from __future__ import annotations
@@ -13,14 +18,15 @@ import json
 import os
 import shutil
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 from tqdm.auto import tqdm
 
-from fmctd_dist.config import Config, resolve_path
+from fmctd_dist.config import Config, is_ant, resolve_path
 from fmctd_dist.data.npz import save_npz
 from fmctd_dist.data.oracle import NoisyOracle
 from fmctd_dist.data.tokens import Normaliser
@@ -52,12 +58,23 @@ def sha256_file(path: Path) -> str:
     return h.hexdigest()
 
 
+def random_start(geo: MazeGeometry, rng: np.random.Generator) -> np.ndarray:
+    """[2] a uniformly drawn free cell's centre + uniform [-1, 1] noise (OGBench navigate's start)."""
+    free = geo.free_cells()
+    return geo.cell_to_xy(free[rng.integers(len(free))]) + rng.uniform(-NOISE, NOISE, size=2)
+
+
+def random_goal(geo: MazeGeometry, rng: np.random.Generator) -> np.ndarray:
+    """[2] a uniformly drawn vertex cell's centre (OGBench navigate's goal set, no goal noise here)."""
+    vertices = geo.vertex_cells()
+    return geo.cell_to_xy(vertices[rng.integers(len(vertices))])
+
+
 def generate_episode(env: PointMaze, oracle: NoisyOracle, steps: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
     """One navigate episode: random start cell, random vertex goal, a new goal on each success."""
     geo: MazeGeometry = env.geometry
-    free, vertices = geo.free_cells(), geo.vertex_cells()
-    start = geo.cell_to_xy(free[rng.integers(len(free))]) + rng.uniform(-NOISE, NOISE, size=2)
-    goal = geo.cell_to_xy(vertices[rng.integers(len(vertices))])
+    start = random_start(geo, rng)
+    goal = random_goal(geo, rng)
     env.set_position(start)
     pos = env.position()
     obs = np.empty((steps, 2), np.float32)
@@ -69,25 +86,88 @@ def generate_episode(env: PointMaze, oracle: NoisyOracle, steps: int, rng: np.ra
         env.goal = goal
         pos, success = env.step(a)
         if success:
-            goal = geo.cell_to_xy(vertices[rng.integers(len(vertices))])
+            goal = random_goal(geo, rng)
     return {"observations": obs, "actions": act, "goals": goals}
+
+
+def episode_rng(cfg: Config, split: str, ep: int) -> np.random.Generator:
+    """Episode ``ep`` of ``split`` draws only from its own stream: any episode can be regenerated alone."""
+    return np.random.default_rng(np.random.SeedSequence([cfg.data.seed, SPLITS[split], ep]))
+
+
+Episode = Callable[[np.random.Generator], dict[str, np.ndarray]]
+
+
+def run_episodes(cfg: Config, split: str, episodes: int, episode: Episode,
+                 progress: bool = True) -> dict[str, np.ndarray]:
+    """Call ``episode(rng)`` (-> arrays [S, ...]) per episode; stack to [E, S, ...] and add ``terminals``."""
+    out: dict[str, list[np.ndarray]] = {}
+    for ep in tqdm(range(episodes), desc=f"{cfg.env.name} {split}", unit="ep", disable=not progress):
+        for k, v in episode(episode_rng(cfg, split, ep)).items():
+            out.setdefault(k, []).append(v)
+    arrays = {k: np.stack(v) for k, v in out.items()}
+    terminals = np.zeros(arrays["observations"].shape[:2], dtype=bool)
+    terminals[:, -1] = True
+    arrays["terminals"] = terminals
+    return arrays
 
 
 def generate_split(cfg: Config, split: str, episodes: int, progress: bool = True) -> dict[str, np.ndarray]:
     env = make_env(cfg.env.name)
     env.reset(1, cfg.data.seed)  # initialise MuJoCo state; positions are then set per episode
     oracle = NoisyOracle(env.geometry, cfg.data.noise)
-    out: dict[str, list[np.ndarray]] = {"observations": [], "actions": [], "goals": []}
-    for ep in tqdm(range(episodes), desc=f"{cfg.env.name} {split}", unit="ep", disable=not progress):
-        rng = np.random.default_rng(np.random.SeedSequence([cfg.data.seed, SPLITS[split], ep]))
-        for k, v in generate_episode(env, oracle, cfg.data.episode_steps, rng).items():
-            out[k].append(v)
+    arrays = run_episodes(cfg, split, episodes,
+                          lambda rng: generate_episode(env, oracle, cfg.data.episode_steps, rng), progress)
     env.close()
-    arrays = {k: np.stack(v) for k, v in out.items()}
-    terminals = np.zeros(arrays["observations"].shape[:2], dtype=bool)
-    terminals[:, -1] = True
-    arrays["terminals"] = terminals
     return arrays
+
+
+class DataSource(Protocol):
+    """What :func:`make_dataset` needs from a generator; layout, seeding and the common manifest are shared."""
+
+    version: int  # generator_version written to (and required in) the manifest
+
+    def generate(self, split: str, episodes: int, progress: bool) -> dict[str, np.ndarray]:
+        """Arrays [E, S, ...] of one split, ``observations`` first dims (E, S), x, y in observations[..., :2]."""
+        ...
+
+    def manifest_fields(self) -> dict[str, Any]:
+        """Source-specific manifest fields, called after every split is generated."""
+        ...
+
+
+class PointSource:
+    """PointMaze data: the noisy BFS oracle's own actions (OGBench's pointmaze navigate recipe)."""
+
+    version = GENERATOR_VERSION
+
+    def __init__(self, cfg: Config):
+        self.cfg = cfg
+
+    def generate(self, split: str, episodes: int, progress: bool) -> dict[str, np.ndarray]:
+        return generate_split(self.cfg, split, episodes, progress)
+
+    def manifest_fields(self) -> dict[str, Any]:
+        return {"oracle": "BFS next-cell direction + N(0, noise^2), clipped; new vertex-cell goal on success "
+                          f"(within {GOAL_TOLERANCE})",
+                "keys": ["observations", "actions", "goals", "terminals"]}
+
+
+def data_source(cfg: Config) -> DataSource:
+    """The generator for ``cfg.env``: the point oracle, or the ant expert (which loads and checks its weights)."""
+    if is_ant(cfg.env.name):
+        from fmctd_dist.data.ant_dataset import AntSource  # deferred: it imports this module
+
+        return AntSource(cfg)
+    return PointSource(cfg)
+
+
+def generator_version(env: str) -> int:
+    if is_ant(env):
+        from fmctd_dist.data.ant_dataset import ANT_GENERATOR_VERSION
+
+        return ANT_GENERATOR_VERSION
+    return GENERATOR_VERSION
 
 
 def make_dataset(cfg: Config, progress: bool = True) -> tuple[Path, dict[str, Any]]:
@@ -97,6 +177,7 @@ def make_dataset(cfg: Config, progress: bool = True) -> tuple[Path, dict[str, An
         return out, load_manifest(out, cfg, verify=True)
     if out.exists() and any(out.iterdir()):
         raise DatasetError(f"{out} exists but has no manifest.json (an interrupted run?); delete the directory and rerun")
+    source = data_source(cfg)  # the ant expert is loaded and checked before anything is written
     tmp = out.with_name(out.name + ".tmp")
     shutil.rmtree(tmp, ignore_errors=True)
     tmp.mkdir(parents=True)
@@ -105,26 +186,24 @@ def make_dataset(cfg: Config, progress: bool = True) -> tuple[Path, dict[str, An
     sha, counts = {}, {}
     normaliser = None
     for split, n in splits.items():
-        arrays = generate_split(cfg, split, n, progress)
+        arrays = source.generate(split, n, progress)
         if split == "train":
-            flat = arrays["observations"].reshape(-1, 2).astype(np.float64)
+            flat = arrays["observations"][..., :2].reshape(-1, 2).astype(np.float64)  # the planner's x, y
             normaliser = (flat.mean(0).tolist(), flat.std(0).tolist())
         save_npz(tmp / f"{split}.npz", arrays)
         sha[split] = sha256_file(tmp / f"{split}.npz")
         counts[split] = n
     manifest = {
-        "generator_version": GENERATOR_VERSION,
+        "generator_version": source.version,
         "env": cfg.env.name,
         "seed": cfg.data.seed,
         "noise": cfg.data.noise,
         "episode_steps": cfg.data.episode_steps,
         "episodes": counts,
-        "oracle": "BFS next-cell direction + N(0, noise^2), clipped; new vertex-cell goal on success "
-                  f"(within {GOAL_TOLERANCE})",
         "sha256": sha,
         "obs_mean": normaliser[0],
         "obs_std": normaliser[1],
-        "keys": ["observations", "actions", "goals", "terminals"],
+        **source.manifest_fields(),
     }
     (tmp / "manifest.json").write_text(json.dumps(manifest, indent=2, sort_keys=True) + "\n")
     os.replace(tmp, out)
@@ -147,9 +226,10 @@ def load_manifest(path: Path, cfg: Config | None = None, verify: bool = True) ->
     for key in MANIFEST_FIELDS:
         if key not in manifest:
             raise DatasetError(f"{mf} lacks the field {key!r}; delete {path} and regenerate it")
-    if manifest["generator_version"] != GENERATOR_VERSION:
+    version = generator_version(str(manifest["env"]))
+    if manifest["generator_version"] != version:
         raise DatasetError(
-            f"{mf}: generator_version={manifest['generator_version']} but this code writes {GENERATOR_VERSION}; "
+            f"{mf}: generator_version={manifest['generator_version']} but this code writes {version}; "
             f"delete {path} and regenerate"
         )
     if cfg is not None:
@@ -159,6 +239,10 @@ def load_manifest(path: Path, cfg: Config | None = None, verify: bool = True) ->
             if manifest[key] != want:
                 raise DatasetError(f"{mf}: {key}={manifest[key]!r} but the config asks for {want!r}; "
                                    f"regenerate or fix data.{key if key != 'env' else 'env.name'}")
+        if is_ant(cfg.env.name):
+            from fmctd_dist.data.ant_dataset import check_expert_matches
+
+            check_expert_matches(manifest, cfg, path)
     if verify:
         for split, digest in manifest["sha256"].items():
             f = path / f"{split}.npz"
@@ -171,7 +255,7 @@ def load_manifest(path: Path, cfg: Config | None = None, verify: bool = True) ->
 
 @dataclass
 class NavigateDataset:
-    """Observations [E, S, 2] per split plus the manifest (digest, normaliser)."""
+    """x, y observations [E, S, 2] per split (what the planner models) plus the manifest (digest, normaliser)."""
 
     path: Path
     manifest: dict[str, Any]
@@ -197,9 +281,9 @@ def load_dataset(cfg: Config, path: Path | None = None) -> NavigateDataset:
                 obs = z["observations"]
         except (KeyError, ValueError, OSError) as e:
             raise DatasetError(f"{path / f'{split}.npz'} is malformed ({e}); delete {path} and regenerate") from None
-        want = (manifest["episodes"][split], manifest["episode_steps"], 2)
+        want = (manifest["episodes"][split], manifest["episode_steps"], manifest.get("obs_dim", 2))
         if obs.shape != want:
             raise DatasetError(f"{path / f'{split}.npz'}: observations shape {obs.shape} != manifest {want}; "
                                "delete the directory and regenerate")
-        splits[split] = obs.astype(np.float32, copy=False)
+        splits[split] = np.ascontiguousarray(obs[..., :2], dtype=np.float32)  # ant: x, y of the 29-D state
     return NavigateDataset(path, manifest, splits["train"], splits["val"])

@@ -1,4 +1,4 @@
-"""PointMaze environments over OGBench (env_only: no network), maze geometry and BFS."""
+"""PointMaze and AntMaze environments over OGBench (env_only: no network), maze geometry and BFS."""
 
 from fmctd_dist.envs.maze import MazeGeometry, maze_geometry
 from fmctd_dist.envs.pointmaze import PointMaze, make_env

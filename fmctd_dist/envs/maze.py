@@ -121,7 +121,7 @@ def check_env_name(name: str) -> str:
 
 @lru_cache(maxsize=None)
 def maze_geometry(name: str) -> MazeGeometry:
-    """Geometry of ``pointmaze-{medium,large,giant}`` read from OGBench's env definition."""
+    """Geometry of ``{pointmaze,antmaze}-{medium,large,giant}`` read from OGBench's env definition."""
     from fmctd_dist.envs.pointmaze import _make_ogbench_env
 
     env = _make_ogbench_env(check_env_name(name))

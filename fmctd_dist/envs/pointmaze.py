@@ -11,11 +11,15 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from fmctd_dist.config import PROTOCOLS
 from fmctd_dist.errors import ConfigError, unknown_name
+
+if TYPE_CHECKING:
+    from fmctd_dist.envs.antmaze import AntMaze
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
@@ -40,7 +44,7 @@ def check_seed(seed: object, field: str = "seed") -> int:
 
 @dataclass
 class Reset:
-    obs: np.ndarray  # [2] start position
+    obs: np.ndarray  # start observation: [2] position (PointMaze) | [29] ant state, x, y first (AntMaze)
     goal: np.ndarray  # [2] goal position
 
 
@@ -89,7 +93,13 @@ class PointMaze:
         self._env.close()
 
 
-def make_env(name: str, protocol: str = "fixed") -> PointMaze:
+def make_env(name: str, protocol: str = "fixed") -> "PointMaze | AntMaze":
+    """``pointmaze-*`` -> :class:`PointMaze`, ``antmaze-*`` -> :class:`~fmctd_dist.envs.antmaze.AntMaze`."""
+    from fmctd_dist.config import is_ant
     from fmctd_dist.envs.maze import check_env_name
 
-    return PointMaze(check_env_name(name), protocol)
+    if is_ant(check_env_name(name)):
+        from fmctd_dist.envs.antmaze import AntMaze
+
+        return AntMaze(name, protocol)
+    return PointMaze(name, protocol)

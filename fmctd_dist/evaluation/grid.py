@@ -15,7 +15,7 @@ from typing import Any, Callable
 
 from tqdm.auto import tqdm
 
-from fmctd_dist.config import Config, git_sha
+from fmctd_dist.config import Config, git_sha, require_planning_env
 from fmctd_dist.device import resolve_device, set_threads
 from fmctd_dist.diffusion.checkpoint import read_manifest, sha256_file
 from fmctd_dist.errors import CheckpointError
@@ -44,6 +44,7 @@ def config_hash(cfg: Config) -> str:
 
 
 def prepare(cfg: Config) -> Prepared:
+    require_planning_env(cfg, "evaluation")  # AntMaze: no low-level policy yet
     device = str(resolve_device(cfg.device))
     ckpt = cfg.checkpoint_dir()
     manifest = read_manifest(ckpt, cfg)  # exists, parses, agrees with env/jump/model/n_tokens
