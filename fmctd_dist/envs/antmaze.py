@@ -83,6 +83,22 @@ class AntMaze:
         self.goal = np.asarray(goal_xy, dtype=np.float64).copy()
         self._u.set_goal(goal_xy=self.goal)
 
+    def restore(self, obs: np.ndarray) -> np.ndarray:
+        """Put the ant in the state of a 29-D observation (qpos 15 + qvel 14, e.g. a dataset row); returns obs.
+
+        MuJoCo's data is reset first (solver warm start, time, controls), so what follows
+        depends on ``obs`` alone, not on what ran before. The env must have been reset once.
+        """
+        import mujoco
+
+        obs = np.asarray(obs, dtype=np.float64)
+        if obs.shape != (OBS_DIM,):
+            raise ValueError(f"{self.name}: restore takes a ({OBS_DIM},) ant observation (qpos 15 + qvel 14), "
+                             f"got {obs.shape}")
+        mujoco.mj_resetData(self._u.model, self._u.data)
+        self._u.set_state(obs[:15], obs[15:])
+        return self.observation()
+
     def observation(self) -> np.ndarray:
         return self._u.get_ob().astype(np.float64)
 

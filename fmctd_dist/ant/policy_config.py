@@ -1,0 +1,130 @@
+"""Config of the goal-conditioned AntMaze policy: ``policy.*`` (network, data, training) and ``reach.*`` (evaluation).
+
+A config of its own, like the expert's (:mod:`fmctd_dist.ant.config`): the planner's config
+digest is recorded with every result row, and training a low-level policy must not change
+it. The dataset is still named by the planner's keys (``env=``, ``data.root``,
+``data.episodes``, ...), so a job's words are split: ``policy.*`` / ``reach.*`` go here,
+everything else to :func:`fmctd_dist.config.load_config`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from omegaconf import OmegaConf
+
+from fmctd_dist.config import ALIASES, GROUPS, Config, all_keys, apply_override, load_config, merge_checked, \
+    resolve_path
+from fmctd_dist.errors import ConfigError, did_you_mean
+
+PREFIXES = ("policy.", "reach.")
+
+
+@dataclass
+class PolicyTrainConfig:
+    out: str = ""  # policy dir (training writes it, evaluation reads it); "" -> runs/<env>-policy
+    hidden: list[int] = field(default_factory=lambda: [256, 256, 256])  # MLP widths, each Linear -> LayerNorm -> ReLU
+    # Hindsight subgoal of row t = the ant's x, y at t + k, k = the sum of geom_draws Geometric(geom_p) draws
+    # (each >= 1), cut at the episode's (or the upright run's) end. 2 x Geometric(0.2): mean 10 steps, mode 5-6,
+    # 90% within 2..19 steps (see fmctd_dist.ant.policy_data.sample_offsets).
+    geom_p: float = 0.2
+    geom_draws: int = 2
+    max_subgoal_dist: float = 4.0  # the relative subgoal's norm is clipped here (input and training); 0 = no clip
+    drop_fallen: bool = True  # train only on rows where the ant is healthy and upright (a fallen ant never recovers)
+    # Optimiser steps. 100k x 256 ~ 29 passes over full medium data (~0.88M upright rows), ~9 min on one busy
+    # core. Small data overfits: 20 episodes peak at ~2k steps (manifest metrics best_val_step tells).
+    max_steps: int = 100_000
+    batch_size: int = 256
+    lr: float = 3e-4  # Adam
+    weight_decay: float = 0.0  # AdamW decoupled weight decay
+    seed: int = 0  # init, batches and the fixed validation set
+    threads: int = 1  # torch intra-op threads; 0 = torch default (one per core; slow on busy cores)
+    ckpt_every: int = 1000  # steps between checkpoints (model.pt + manifest.json + train_state.pt)
+    val_every: int = 1000  # steps between validation losses
+    val_rows: int = 4096  # fixed (row, subgoal) pairs drawn once from the val split
+    log_every: int = 50  # steps between progress-bar updates
+
+
+@dataclass
+class ReachConfig:
+    rows: int = 200  # val rows tried (0 = no reach evaluation at the end of training)
+    offset: int = 10  # subgoal = the val episode's x, y this many steps after the row (the controller's interval)
+    max_steps: int = 50  # env steps per try
+    radius: float = 1.0  # reached = within this of the subgoal after a step (the controller's advance radius)
+    seed: int = 0  # which rows
+    expert: bool = True  # also measure the ant expert steered at the subgoal (reference) ...
+    zero: bool = True  # ... and zero torques (the restored velocity alone; the floor)
+
+
+@dataclass
+class PolicyConfig:
+    policy: PolicyTrainConfig = field(default_factory=PolicyTrainConfig)
+    reach: ReachConfig = field(default_factory=ReachConfig)
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+
+def default_out(env_name: str) -> str:
+    return f"runs/{env_name}-policy"
+
+
+def policy_dir(cfg: Config, pcfg: PolicyConfig) -> Path:
+    return resolve_path(pcfg.policy.out or default_out(cfg.env.name))
+
+
+def load_policy_args(args: list[str] | None = None) -> tuple[Config, PolicyConfig]:
+    """Split ``key=value`` words: ``policy.*`` / ``reach.*`` -> PolicyConfig, the rest -> the planner's Config."""
+    pkeys = all_keys(PolicyConfig())
+    cfg_words: list[str] = []
+    pcfg = OmegaConf.structured(PolicyConfig)
+    for arg in args or []:
+        if "=" not in arg:
+            raise ConfigError(f"override {arg!r} is not key=value; e.g. env=antmaze-medium or policy.max_steps=5000")
+        key, value = (s.strip() for s in arg.split("=", 1))
+        if key.startswith(PREFIXES):
+            if key not in pkeys:
+                raise ConfigError(f"unknown config key {key!r}{did_you_mean(key, pkeys)}")
+            pcfg = apply_override(pcfg, key, value, PolicyConfig())
+            continue
+        known = all_keys(Config()) + list(GROUPS) + list(ALIASES)
+        if key not in known:
+            raise ConfigError(f"unknown config key {key!r}{did_you_mean(key, known + pkeys)}")
+        cfg_words.append(arg)
+    cfg = load_config(cfg_words, env="antmaze-medium", method="mctd")
+    obj: PolicyConfig = OmegaConf.to_object(pcfg)  # type: ignore[assignment]
+    validate_policy(obj)
+    if not cfg.env.name.startswith("antmaze-"):
+        raise ConfigError(f"env={cfg.env.name} has no low-level policy (a point is driven by the PD controller); "
+                          "use env=antmaze-medium, antmaze-large or antmaze-giant")
+    return cfg, obj
+
+
+def policy_config_from_dict(d: dict[str, Any]) -> PolicyConfig:
+    """Rebuild from ``to_dict()`` output (manifests, train states)."""
+    cfg = merge_checked(OmegaConf.structured(PolicyConfig), OmegaConf.create(d), "config dict", PolicyConfig())
+    return OmegaConf.to_object(cfg)  # type: ignore[return-value]
+
+
+def validate_policy(cfg: PolicyConfig) -> None:
+    """Raise one ConfigError naming the field and the fix."""
+    p, r = cfg.policy, cfg.reach
+    for key, value in (("policy.max_steps", p.max_steps), ("policy.batch_size", p.batch_size), ("policy.lr", p.lr),
+                       ("policy.geom_draws", p.geom_draws), ("policy.ckpt_every", p.ckpt_every),
+                       ("policy.val_every", p.val_every), ("policy.val_rows", p.val_rows),
+                       ("policy.log_every", p.log_every), ("reach.offset", r.offset),
+                       ("reach.max_steps", r.max_steps), ("reach.radius", r.radius)):
+        if value <= 0:
+            raise ConfigError(f"{key}={value} must be > 0")
+    for key, value in (("policy.weight_decay", p.weight_decay), ("policy.seed", p.seed),
+                       ("policy.threads", p.threads), ("policy.max_subgoal_dist", p.max_subgoal_dist),
+                       ("reach.rows", r.rows), ("reach.seed", r.seed)):
+        if value < 0:
+            raise ConfigError(f"{key}={value} must be >= 0")
+    if not 0 < p.geom_p <= 1:
+        raise ConfigError(f"policy.geom_p={p.geom_p} must be in (0, 1]; mean offset = policy.geom_draws / geom_p")
+    if not p.hidden or any(h <= 0 for h in p.hidden):
+        raise ConfigError(f"policy.hidden={p.hidden} must be a non-empty list of positive widths, e.g. [256,256,256]")

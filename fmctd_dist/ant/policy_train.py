@@ -1,0 +1,222 @@
+"""Training loop of the goal-conditioned ant policy: resumable, bitwise deterministic from a seed.
+
+Each step draws ``batch_size`` (row, hindsight subgoal) pairs from the train split and
+takes one AdamW step on the MSE to the row's torque. Every ``val_every`` steps the MSE on a
+fixed set of ``val_rows`` val pairs is logged beside the *expert's* MSE on the same rows
+(the noise floor: the data is expert + N(0, 0.2^2), so no policy gets far below ~0.04).
+Every ``ckpt_every`` steps it writes model.pt + manifest.json and train_state.pt (network,
+optimiser, batch RNG, history); rerunning continues from there and is bitwise the
+uninterrupted run (same thread count). At the end, with ``reach.rows > 0``, the reach
+rate of the policy and of the expert (:mod:`fmctd_dist.ant.reach`) go into the manifest.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from fmctd_dist.ant.policy import MANIFEST_FILE, NAME, GoalPolicyNet, build_net, policy_input, \
+    read_policy_manifest, save_policy
+from fmctd_dist.ant.policy_config import PolicyConfig, policy_dir
+from fmctd_dist.ant.policy_data import PolicyRows, load_policy_data, sample_pairs
+from fmctd_dist.data.dataset import dataset_dir
+from fmctd_dist.config import Config, git_sha, resolve_path
+from fmctd_dist.device import set_threads
+from fmctd_dist.diffusion.checkpoint import load_train_state, save_train_state
+from fmctd_dist.errors import CheckpointError
+
+BATCH_STREAM, VAL_STREAM, NORM_STREAM = 3, 4, 5  # SeedSequence([policy.seed, stream])
+NORM_ROWS = 65_536  # hindsight pairs whose inputs set the network's input normalisation
+RESUME_FIELDS = ("policy.seed", "policy.hidden", "policy.geom_p", "policy.geom_draws", "policy.max_subgoal_dist",
+                 "policy.drop_fallen", "policy.batch_size")
+
+
+def _rng(seed: int, stream: int) -> np.random.Generator:
+    return np.random.Generator(np.random.PCG64(np.random.SeedSequence([seed, stream])))
+
+
+def make_batch(rows: PolicyRows, i: np.ndarray, j: np.ndarray, max_dist: float) -> tuple[torch.Tensor, torch.Tensor]:
+    """(row, subgoal row) indices -> inputs [B, 29], target torques [B, 8]."""
+    x = policy_input(rows.obs[i], rows.obs[j, :2], max_dist)
+    return torch.from_numpy(x), torch.from_numpy(rows.actions[i])
+
+
+@torch.no_grad()
+def mse(net: GoalPolicyNet, x: torch.Tensor, y: torch.Tensor, chunk: int = 4096) -> float:
+    net.eval()
+    total = sum(float((net(x[k:k + chunk]) - y[k:k + chunk]).square().sum()) for k in range(0, len(x), chunk))
+    net.train()
+    return total / y.numel()
+
+
+def expert_mse(cfg: Config, rows: PolicyRows, i: np.ndarray) -> float | None:
+    """The expert's MSE to the data's torques on rows i (its own input: the oracle direction to the data's goal)."""
+    from fmctd_dist.ant.direction_env import expert_input
+    from fmctd_dist.ant.expert import load_expert
+    from fmctd_dist.data.oracle import NoisyOracle
+    from fmctd_dist.envs.maze import maze_geometry
+
+    expert = load_expert(resolve_path(cfg.data.expert))
+    oracle = NoisyOracle(maze_geometry(cfg.env.name), 0.0)
+    obs = rows.obs[i].astype(np.float64)
+    dirs = np.stack([oracle.direction(o[:2], g) for o, g in zip(obs, rows.goals[i].astype(np.float64))])
+    pred = expert.act(expert_input(obs, dirs))
+    return float(np.mean((pred - rows.actions[i]) ** 2))
+
+
+def _get(d: dict[str, Any], dotted: str) -> Any:
+    for part in dotted.split("."):
+        d = d[part]
+    return d
+
+
+def _check_resume(state: dict[str, Any], pcfg: PolicyConfig, env: str, data_sha: dict[str, str], out: Path) -> None:
+    now = pcfg.to_dict()
+    pairs = [(k, _get(state["config"], k), _get(now, k)) for k in RESUME_FIELDS]
+    pairs += [("env", state["env"], env)]
+    for key, have, want in pairs:
+        if have != want:
+            fix = f"set {key}={have!r}" if key != "env" else f"use env={have}"
+            raise CheckpointError(f"{out} holds a policy run with {key}={have!r} but the config has {key}={want!r}; "
+                                  f"{fix} to continue it, or use a fresh policy.out dir")
+    if state["dataset_sha256"] != data_sha:
+        raise CheckpointError(f"{out} was trained on another dataset (train sha256 "
+                              f"{state['dataset_sha256']['train'][:16]}..., now {data_sha['train'][:16]}...); point "
+                              "data.* at the dataset it started on, or use a fresh policy.out dir")
+
+
+def _finished(out: Path) -> dict[str, Any]:
+    """Summary of a finished run from its manifest (reach included)."""
+    m = read_policy_manifest(out)
+    return {"step": int(m["steps"]), "wall_time_s": float(m["wall_time_s"]), "out_dir": str(out),
+            "resumed_from": int(m["steps"]), "name": NAME, "rows": m["dataset"]["rows"], **m["metrics"]}
+
+
+def train_policy(cfg: Config, pcfg: PolicyConfig, out_dir: str | Path | None = None,
+                 progress: bool = True) -> dict[str, Any]:
+    """Train (or resume) into out_dir (default policy.out); returns the manifest's summary."""
+    p = pcfg.policy
+    set_threads(p.threads)
+    out = Path(out_dir) if out_dir is not None else policy_dir(cfg, pcfg)
+    train_rows, val_rows, data_manifest = load_policy_data(cfg, p.drop_fallen)
+    data_sha = dict(data_manifest["sha256"])
+
+    m = read_policy_manifest(out) if (out / MANIFEST_FILE).exists() else None  # another kind: CheckpointError
+    state = load_train_state(out)
+    if state is None and m is not None:
+        if int(m["steps"]) < p.max_steps:
+            raise CheckpointError(f"{out} holds a policy ({m['steps']} steps) without train_state.pt, so its "
+                                  "optimiser is gone; train into a fresh policy.out dir (this one is left as it is)")
+        return _finished(out)  # finished (e.g. shipped): nothing to do
+    if state is not None:
+        _check_resume(state, pcfg, cfg.env.name, data_sha, out)
+        if int(state["step"]) >= p.max_steps:
+            return _finished(out)
+
+    net = build_net(p.hidden, p.seed)
+    ni, nj = sample_pairs(train_rows, _rng(p.seed, NORM_STREAM), NORM_ROWS, p.geom_p, p.geom_draws)
+    net.set_normaliser(make_batch(train_rows, ni, nj, p.max_subgoal_dist)[0].numpy())
+    opt = torch.optim.AdamW(net.parameters(), lr=p.lr, weight_decay=p.weight_decay)
+    rng = _rng(p.seed, BATCH_STREAM)
+    vi, vj = sample_pairs(val_rows, _rng(p.seed, VAL_STREAM), p.val_rows, p.geom_p, p.geom_draws)
+    vx, vy = make_batch(val_rows, vi, vj, p.max_subgoal_dist)
+    floor = expert_mse(cfg, val_rows, vi)
+    step, wall, resumed_from = 0, 0.0, None
+    hist: dict[str, list[list[float]]] = {"train": [], "val": []}  # [step, loss]
+    reach: dict[str, Any] | None = None
+    if state is not None:
+        net.load_state_dict(state["net"])
+        opt.load_state_dict(state["opt"])
+        for group in opt.param_groups:  # policy.lr may change between runs
+            group["lr"] = p.lr
+        rng.bit_generator.state = state["rng"]
+        step, wall, hist, resumed_from = int(state["step"]), float(state["wall_time_s"]), state["history"], \
+            int(state["step"])
+
+    dataset = {"path": str(dataset_dir(cfg)), "sha256": data_sha, "digest": data_sha["train"][:16],
+               "episodes": data_manifest["episodes"], "episode_steps": data_manifest["episode_steps"],
+               "seed": data_manifest["seed"], "noise": data_manifest["noise"], "expert": data_manifest.get("expert"),
+               "rows": {"train": train_rows.stats, "val": val_rows.stats}}
+
+    def metrics() -> dict[str, Any]:
+        best = min(hist["val"], key=lambda sv: sv[1]) if hist["val"] else [None, None]
+        return {"train_loss": hist["train"][-1][1] if hist["train"] else None,
+                "val_loss": hist["val"][-1][1] if hist["val"] else None, "val_mse_expert": floor,
+                "best_val_loss": best[1], "best_val_step": best[0],  # far below `steps`: overfitting
+                "reach": reach}
+
+    def save() -> None:
+        save_policy(out, net, {
+            "config": pcfg.to_dict(), "env": cfg.env.name, "dataset": dataset, "git_sha": git_sha(),
+            "steps": step, "wall_time_s": wall, "metrics": metrics(), "val_history": hist["val"],
+            "data_config": {k: getattr(cfg.data, k) for k in ("root", "seed", "episodes", "episode_steps", "noise",
+                                                              "expert")},
+        })
+        save_train_state(out, {"net": net.state_dict(), "opt": opt.state_dict(), "rng": rng.bit_generator.state,
+                               "step": step, "wall_time_s": wall, "history": hist, "config": pcfg.to_dict(),
+                               "env": cfg.env.name, "dataset_sha256": data_sha})
+
+    bar = tqdm(total=p.max_steps, initial=step, disable=not progress, desc=f"policy {cfg.env.name}",
+               dynamic_ncols=True)
+    t_seg = t_log = time.perf_counter()
+    n_log, loss_sum = 0, 0.0
+    net.train()
+    while step < p.max_steps:
+        i, j = sample_pairs(train_rows, rng, p.batch_size, p.geom_p, p.geom_draws)
+        x, y = make_batch(train_rows, i, j, p.max_subgoal_dist)
+        loss = (net(x) - y).square().mean()
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        opt.step()
+        step += 1
+        n_log += 1
+        loss_sum += float(loss.detach())
+        if step % p.log_every == 0 or step == p.max_steps:
+            now = time.perf_counter()
+            hist["train"].append([step, loss_sum / n_log])
+            post = {"loss": f"{loss_sum / n_log:.4f}", "steps_s": f"{n_log / (now - t_log):.0f}"}
+            if hist["val"]:
+                post["val"] = f"{hist['val'][-1][1]:.4f}"
+            bar.set_postfix(post, refresh=False)
+            bar.update(n_log)
+            n_log, loss_sum, t_log = 0, 0.0, now
+        if step % p.val_every == 0 or step == p.max_steps:
+            hist["val"].append([step, mse(net, vx, vy)])
+        if step == p.max_steps and pcfg.reach.rows > 0:
+            reach = run_reach(cfg, pcfg, net, val_rows)
+        if step % p.ckpt_every == 0 or step == p.max_steps:
+            now = time.perf_counter()
+            wall += now - t_seg
+            t_seg = now
+            save()
+    bar.close()
+    return {"step": step, "wall_time_s": wall, "out_dir": str(out), "resumed_from": resumed_from, "name": NAME,
+            "rows": dataset["rows"], **metrics()}
+
+
+def run_reach(cfg: Config, pcfg: PolicyConfig, net: GoalPolicyNet, val_rows: PolicyRows) -> dict[str, Any]:
+    """Reach rate of this network (and of the expert when reach.expert) on val rows."""
+    from fmctd_dist.ant.expert import load_expert
+    from fmctd_dist.ant.reach import evaluate_reach, expert_controller, zero_controller
+
+    max_dist = pcfg.policy.max_subgoal_dist
+
+    @torch.no_grad()
+    def policy(obs: np.ndarray, subgoal: np.ndarray) -> np.ndarray:
+        return net(torch.from_numpy(policy_input(obs, subgoal, max_dist))).numpy().astype(np.float64)
+
+    net.eval()
+    ctrls = {"policy": policy}
+    if pcfg.reach.expert:
+        ctrls["expert"] = expert_controller(load_expert(resolve_path(cfg.data.expert)))
+    if pcfg.reach.zero:
+        ctrls["zero"] = zero_controller
+    r = pcfg.reach
+    out = evaluate_reach(cfg.env.name, ctrls, val_rows, r.rows, r.offset, r.max_steps, r.radius, r.seed)
+    net.train()
+    return out
