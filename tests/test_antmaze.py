@@ -182,17 +182,19 @@ def test_ant_env_configs_follow_the_paper():
         assert cfg.data.noise == 0.2 and cfg.data.expert == "checkpoints/ant-expert"
 
 
-def test_antmaze_evaluation_is_refused_before_anything_starts():
+def test_antmaze_evaluation_without_a_policy_fails_before_anything_starts(tmp_path):
     from fmctd_dist.evaluation.grid import prepare
-    from fmctd_dist.planners import make_planner
 
-    cfg = load_config(["env=antmaze-medium", "runner=local", "tasks=[1]", "seeds=[0]"])
-    with pytest.raises(ConfigError, match=r"antmaze evaluation needs the low-level policy \(issue 9\)"):
+    missing = tmp_path / "no-policy"
+    cfg = load_config(["env=antmaze-medium", "runner=local", "tasks=[1]", "seeds=[0]", f"env.policy={missing}"])
+    with pytest.raises(CheckpointError, match=r"env.policy=.*no-policy \(the ant's low-level policy"):
         prepare(cfg)
-    with pytest.raises(ConfigError, match="antmaze evaluation needs the low-level policy"):
-        make_planner(cfg, denoiser=None, normaliser=None)  # type: ignore[arg-type]
-    out = subprocess.run([sys.executable, str(REPO_ROOT / "jobs" / "eval.py"), "env=antmaze-medium"],
-                         capture_output=True, text=True, timeout=120)
+    # a planner checkpoint is not a policy: one clear error naming what it is
+    cfg = load_config(["env=antmaze-medium", "env.policy=checkpoints/pointmaze-medium-h5"])
+    with pytest.raises(CheckpointError, match="not a goal-conditioned ant policy"):
+        prepare(cfg)
+    out = subprocess.run([sys.executable, str(REPO_ROOT / "jobs" / "eval.py"), "env=antmaze-medium",
+                          f"env.policy={missing}"], capture_output=True, text=True, timeout=120)
     assert out.returncode == 2
-    assert out.stderr.strip().startswith("error: antmaze evaluation needs the low-level policy (issue 9)")
+    assert out.stderr.strip().startswith("error: env.policy=")
     assert "Traceback" not in out.stderr

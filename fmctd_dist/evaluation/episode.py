@@ -1,5 +1,6 @@
-"""One PointMaze episode: plan from the current position, follow with the PD controller,
-replan every ``method.replan_every`` env steps (0 = open loop), stop at success or budget.
+"""One maze episode: plan from the current position, follow the plan with the robot's controller
+(PD on waypoints for the point, subgoals + learned policy for the ant), replan every
+``method.replan_every`` env steps (0 = open loop), stop at success or budget.
 
 Returns a result row (design §7); the episode seed only feeds the planner's seeds (and the
 start/goal noise under ``env.protocol=ogbench``), so an episode is a pure function of
@@ -14,18 +15,24 @@ from typing import Any
 import numpy as np
 
 from fmctd_dist.config import Config
-from fmctd_dist.control.pd import PDController
 from fmctd_dist.envs.pointmaze import PointMaze
+from fmctd_dist.evaluation.controllers import ControllerFactory, controller_factory
 from fmctd_dist.planners.base import Planner, plan_seed
 
 
 def run_episode(cfg: Config, env: PointMaze, planner: Planner, task: int, seed: int,
-                time_limit_s: float | None = None) -> dict[str, Any]:
-    """Run one episode and return its row (without the run-level provenance fields)."""
+                time_limit_s: float | None = None, make_controller: ControllerFactory | None = None) -> dict[str, Any]:
+    """Run one episode and return its row (without the run-level provenance fields).
+
+    ``make_controller`` (plan -> controller): pass one built once per env (the ant's loads a
+    policy); default :func:`controller_factory` of ``cfg``.
+    """
     limit = cfg.eval.episode_time_limit if time_limit_s is None else time_limit_s
+    make_controller = make_controller or controller_factory(cfg)
     t_episode = time.perf_counter()
     reset = env.reset(task, seed)
-    pos, goal = reset.obs, reset.goal
+    obs, goal = reset.obs, reset.goal
+    pos = obs[:2]  # the planner's state: x, y (the ant's observation has 27 more features)
     traj, first_plan = [pos], None
     steps, success, timed_out = 0, False, False
     plan_time = denoise_time = call_time = 0.0
@@ -43,9 +50,10 @@ def run_episode(cfg: Config, env: PointMaze, planner: Planner, task: int, seed: 
         if out.timed_out or (limit and plan_time > limit):
             timed_out = True
             break
-        ctrl = PDController(out.waypoints)
+        ctrl = make_controller(out.waypoints)
         for _ in range(min(cfg.method.replan_every or cfg.env.max_steps, cfg.env.max_steps - steps)):
-            pos, success = env.step(ctrl.act(pos))
+            obs, success = env.step(ctrl.act(obs))
+            pos = obs[:2]
             traj.append(pos)
             steps += 1
             if success:

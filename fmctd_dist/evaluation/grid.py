@@ -15,10 +15,11 @@ from typing import Any, Callable
 
 from tqdm.auto import tqdm
 
-from fmctd_dist.config import Config, git_sha, require_planning_env
+from fmctd_dist.config import Config, git_sha
 from fmctd_dist.device import resolve_device, set_threads
 from fmctd_dist.diffusion.checkpoint import read_manifest, sha256_file
 from fmctd_dist.errors import CheckpointError
+from fmctd_dist.evaluation.controllers import check_controller, controller_factory
 from fmctd_dist.evaluation.episode import describe, run_episode
 from fmctd_dist.evaluation.results import ResultStore
 
@@ -44,7 +45,7 @@ def config_hash(cfg: Config) -> str:
 
 
 def prepare(cfg: Config) -> Prepared:
-    require_planning_env(cfg, "evaluation")  # AntMaze: no low-level policy yet
+    check_controller(cfg)  # AntMaze: the low-level policy exists and was trained for this maze
     device = str(resolve_device(cfg.device))
     ckpt = cfg.checkpoint_dir()
     manifest = read_manifest(ckpt, cfg)  # exists, parses, agrees with env/jump/model/n_tokens
@@ -90,10 +91,11 @@ def run_local(p: Prepared, store: ResultStore, progress: bool = True,
     manifest = read_manifest(p.checkpoint)
     planner = make_planner(cfg, denoiser, normaliser_from_manifest(manifest), cfg.eval.episode_time_limit)
     env = make_env(cfg.env.name, cfg.env.protocol)
+    make_controller = controller_factory(cfg)
     rows = []
     bar = tqdm(todo, desc=f"{cfg.method.name} {cfg.env.name}", unit="ep", disable=not progress)
     for task, seed in bar:
-        row = {**run_episode(cfg, env, planner, task, seed), **provenance(p, 0)}
+        row = {**run_episode(cfg, env, planner, task, seed, make_controller=make_controller), **provenance(p, 0)}
         store.write(row)
         rows.append(row)
         bar.set_postfix(success=f"{sum(r['success'] for r in rows)}/{len(rows)}")

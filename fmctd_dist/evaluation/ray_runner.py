@@ -3,7 +3,7 @@
     job process: prepare() (all checks) -> ray.init -> DenoiserPool (N DenoiserActors)
                  -> E EnvActors, each with its own PlannerDriver -> missing (task, seed) keys
                  fanned out over the EnvActors -> each finished row written here, at once
-    EnvActor:    env + PD controller (run_episode); its planner is a proxy that asks the driver
+    EnvActor:    env + controller (run_episode); its planner is a proxy that asks the driver
     PlannerDriver: owns the tree of each plan call (selection/backup are serial, here) and
                  shards every expansion/simulation batch over the shared denoiser actors
 
@@ -89,20 +89,22 @@ class _DriverPlanner:
 
 @ray.remote(num_cpus=0)
 class EnvActor:
-    """Runs whole episodes (env + PD controller) and returns their rows; prints nothing."""
+    """Runs whole episodes (env + controller: PD, or the ant's policy) and returns their rows; prints nothing."""
 
     def __init__(self, prepared: Prepared, driver):
         from fmctd_dist.envs import make_env
+        from fmctd_dist.evaluation.controllers import controller_factory
 
         _one_thread()
         self.cfg = prepared.cfg
         self.env = make_env(self.cfg.env.name, self.cfg.env.protocol)
+        self.make_controller = controller_factory(self.cfg)
         self.planner = _DriverPlanner(driver)
 
     def run(self, task: int, seed: int) -> dict[str, Any]:
         from fmctd_dist.evaluation.episode import run_episode
 
-        return run_episode(self.cfg, self.env, self.planner, task, seed)
+        return run_episode(self.cfg, self.env, self.planner, task, seed, make_controller=self.make_controller)
 
 
 def check_ray_config(p: Prepared) -> None:

@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-from fmctd_dist.config import Config, require_planning_env
+from fmctd_dist.config import Config
 from fmctd_dist.data.tokens import Normaliser
 from fmctd_dist.denoiser.protocol import Denoiser
 from fmctd_dist.errors import unknown_name
 
 
 def make_planner(cfg: Config, denoiser: Denoiser, normaliser: Normaliser, time_limit_s: float = 0.0):
-    require_planning_env(cfg, f"method.planner={cfg.method.planner}")
     if cfg.method.planner == "mctd":
         from fmctd_dist.planners.mctd import MCTDPlanner
 
