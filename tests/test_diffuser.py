@@ -85,9 +85,11 @@ def test_diffuser_config_and_paper_size():
     assert load_config(["method=diffuser-replan"]).method.replan_every == 50
     assert load_config(["method=diffuser"]).method.replan_every == 0
     assert load_config(["method=diffusion-forcing"]).checkpoint_dir().name == "pointmaze-medium-h1"
-    model = build_model(load_config(["method=diffuser"]).model, 501)
+    model = build_model(load_config(["method=diffuser", "model.unet_channels=[32,128,256]"]).model, 501)
     assert isinstance(model, TemporalUnet) and model.channels == [32, 128, 256] and model.factor == 4
     assert 3_000_000 < model.num_params() < 4_500_000  # Janner's maze2d U-Net (dim 32, mults 1-4-8): ~3.7M
+    shipped = build_model(load_config(["method=diffuser"]).model, 501)  # the width traded for steps on CPU
+    assert shipped.channels == [32, 64, 128] and 900_000 < shipped.num_params() < 1_100_000
 
 
 def test_unet_output_shape_any_length():

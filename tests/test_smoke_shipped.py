@@ -29,8 +29,9 @@ def test_fast_mctd_solves_medium_task1_seed0():
 DIFFUSER_MEDIUM = load_config(["method=diffuser", "env=pointmaze-medium"]).checkpoint_dir()
 
 
-@pytest.mark.skipif(not (DIFFUSER_MEDIUM / "manifest.json").is_file(),
-                    reason="no shipped pointmaze-medium-diffuser checkpoint yet (issue 7: its plans ignore the start)")
+@pytest.mark.xfail(strict=True, reason="issue 7: at 9000 of the paper's 20000 steps (width 32-64-128) the shipped "
+                   "Diffuser's first plan frame is still 1.4-4.9 from the inpainted start (docs/results.md section 3); "
+                   "strict: once a retrained checkpoint passes, this mark must go")
 def test_shipped_diffuser_plan_on_medium_task1_is_warp_free():
     cfg = load_config(["method=diffuser", "env=pointmaze-medium"])
     model, manifest = load_checkpoint(cfg.checkpoint_dir(), cfg)

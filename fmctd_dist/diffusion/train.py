@@ -35,7 +35,7 @@ VAL_NOISE_SEED = 12345  # fixed noise for validation so losses are comparable ac
 LOG_EVERY = 10  # steps between progress-bar updates (each one syncs the device)
 # The paper's training (appendix tables "Hyperparameters for the Diffusion Forcing" / "... for the Diffuser").
 PAPER_TRAINING = {"df": {"layers": 12, "batch_size": 1024, "steps": 200_005},
-                  "diffuser": {"batch_size": 32, "steps": 20_000}}
+                  "diffuser": {"batch_size": 32, "steps": 20_000, "unet_channels": [32, 128, 256]}}
 
 
 class TrainDataLike(Protocol):
@@ -124,6 +124,8 @@ def vs_paper(cfg: Config, step: int) -> str:
     parts = [f"{step} of the paper's {paper['steps']} steps at batch {cfg.train.batch_size} (paper "
              f"{paper['batch_size']}): {seen:,} training windows, {100 * seen / (paper['steps'] * paper['batch_size']):.1f}%"
              " of the paper's"]
+    if "unet_channels" in paper and list(cfg.model.unet_channels) != paper["unet_channels"]:
+        parts.append(f"U-Net channels {list(cfg.model.unet_channels)} (paper {paper['unet_channels']})")
     if "layers" in paper:
         parts.append(f"{cfg.model.layers} of the paper's {paper['layers']} layers (width {cfg.model.width})")
     return "; ".join(parts)
