@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
-import contextlib
 import os
 
 import pytest
+
+from fmctd_dist.device import torch_threads  # noqa: F401 - re-exported: tests do `from conftest import torch_threads`
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
@@ -20,19 +21,6 @@ def tiny_dataset(tmp_path_factory):
     cfg = load_config(TINY_DATA + [f"data.root={root}"], method="mctd")
     path, _ = make_dataset(cfg, progress=False)
     return cfg, path
-
-
-@contextlib.contextmanager
-def torch_threads(n: int):
-    """2 shared cores: OpenMP threads stall badly when a neighbour is busy; 1 thread is steady."""
-    import torch
-
-    before = torch.get_num_threads()
-    torch.set_num_threads(n)
-    try:
-        yield
-    finally:
-        torch.set_num_threads(before)
 
 
 @pytest.fixture

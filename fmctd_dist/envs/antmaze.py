@@ -14,9 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from fmctd_dist.config import PROTOCOLS
-from fmctd_dist.envs.pointmaze import NOISE, Reset, _make_ogbench_env, check_seed
-from fmctd_dist.errors import unknown_name
+from fmctd_dist.envs.pointmaze import OGBenchMaze, Reset, check_seed
 
 GOAL_TOLERANCE = 0.5  # OGBench ant/humanoid success radius (point: 1.0)
 OBS_DIM = 29  # qpos (x, y, z, quaternion 4, 8 joints) + qvel (14)
@@ -40,29 +38,12 @@ def upright(obs: np.ndarray) -> np.ndarray:
     return 1.0 - 2.0 * (q[..., 1] ** 2 + q[..., 2] ** 2) > 0.0
 
 
-class AntMaze:
+class AntMaze(OGBenchMaze):
     """One AntMaze env. ``reset(task_id, seed)`` then ``step(action [8]) -> (obs [29], success)``."""
-
-    def __init__(self, name: str, protocol: str = "fixed"):
-        from fmctd_dist.envs.maze import maze_geometry
-
-        if protocol not in PROTOCOLS:
-            raise unknown_name("env.protocol", protocol, PROTOCOLS)
-        self.geometry = maze_geometry(name)
-        self.name = name
-        self.protocol = protocol
-        self._env = _make_ogbench_env(name)
-        self._u = self._env.unwrapped
-        self.goal = np.zeros(2)
 
     def reset(self, task_id: int, seed: int) -> Reset:
         """Task ``task_id`` (1..5): start/goal at its cell centres (``fixed``) or with seeded +-1 noise."""
-        seed = check_seed(seed)
-        task = self.geometry.task(task_id)
-        start, goal = task.init_xy.copy(), task.goal_xy.copy()
-        if self.protocol == "ogbench":
-            noise = np.random.default_rng(np.random.SeedSequence([seed, task_id])).uniform(-NOISE, NOISE, size=4)
-            start, goal = start + noise[:2], goal + noise[2:]
+        start, goal = self.task_start_goal(task_id, seed)
         return Reset(self.reset_to(start, goal, seed), goal.copy())
 
     def reset_to(self, start_xy: np.ndarray, goal_xy: np.ndarray, seed: int) -> np.ndarray:
@@ -124,6 +105,3 @@ class AntMaze:
             raise ValueError(f"{self.name}: an action has shape {action.shape}, the ant takes ({ACT_DIM},) torques")
         ob, _, _, _, info = self._u.step(np.clip(action, -1.0, 1.0))
         return ob.astype(np.float64), bool(info["success"])
-
-    def close(self) -> None:
-        self._env.close()

@@ -48,8 +48,8 @@ class Reset:
     goal: np.ndarray  # [2] goal position
 
 
-class PointMaze:
-    """One PointMaze env. ``reset(task_id, seed)`` then ``step(action) -> (obs, success)``."""
+class OGBenchMaze:
+    """What PointMaze and AntMaze share: the OGBench env, its geometry, and the start/goal protocol."""
 
     def __init__(self, name: str, protocol: str = "fixed"):
         from fmctd_dist.envs.maze import maze_geometry
@@ -63,15 +63,27 @@ class PointMaze:
         self._u = self._env.unwrapped
         self.goal = np.zeros(2)
 
-    def reset(self, task_id: int, seed: int) -> Reset:
+    def task_start_goal(self, task_id: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+        """Task ``task_id`` (1..5): start/goal at its cell centres (``fixed``) or with seeded +-1 noise."""
         seed = check_seed(seed)
         task = self.geometry.task(task_id)
-        self._env.action_space.seed(seed)
-        self._u.reset(seed=seed, options=dict(task_id=task_id))
         start, goal = task.init_xy.copy(), task.goal_xy.copy()
         if self.protocol == "ogbench":
             noise = np.random.default_rng(np.random.SeedSequence([seed, task_id])).uniform(-NOISE, NOISE, size=4)
             start, goal = start + noise[:2], goal + noise[2:]
+        return start, goal
+
+    def close(self) -> None:
+        self._env.close()
+
+
+class PointMaze(OGBenchMaze):
+    """One PointMaze env. ``reset(task_id, seed)`` then ``step(action) -> (obs, success)``."""
+
+    def reset(self, task_id: int, seed: int) -> Reset:
+        start, goal = self.task_start_goal(task_id, seed)
+        self._env.action_space.seed(seed)
+        self._u.reset(seed=seed, options=dict(task_id=task_id))
         self._u.set_goal(goal_xy=goal)
         self._u.set_xy(start)
         self.goal = goal
@@ -88,9 +100,6 @@ class PointMaze:
         self._u.step(np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0))
         pos = self.position()
         return pos, bool(np.linalg.norm(pos - self.goal) <= GOAL_TOLERANCE)
-
-    def close(self) -> None:
-        self._env.close()
 
 
 def make_env(name: str, protocol: str = "fixed") -> "PointMaze | AntMaze":
