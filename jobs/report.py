@@ -8,7 +8,9 @@ Reads the run ``main`` (the maze table: every method x maze) and the ablation ru
 ``jobs/eval.py ... eval.run=ablate-k/10`` etc.; the commands are in docs/results.md), and
 rewrites only the blocks between ``<!-- report:NAME -->`` markers. Also writes
 ``docs/eval_rows.parquet``: every row without its plan/trajectory arrays, so each number in the
-tables can be traced to its episodes from git alone.
+tables can be traced to its episodes from git alone. That file is also read back: the tables are
+its rows with each episode that ``results/`` also holds replaced by the fresh row, so a fresh
+machine (no ``results/``) adds rows without losing earlier sessions' ones.
 """
 
 from __future__ import annotations
@@ -23,7 +25,7 @@ from fmctd_dist.config import REPO_ROOT, resolve_path
 from fmctd_dist.envs import maze_geometry
 from fmctd_dist.evaluation.plots import plot_ablation, plot_episode, plot_success_vs_time
 from fmctd_dist.evaluation.report import ABLATIONS, ENV_ORDER, ablation_summary, ablation_table, fill_markers, \
-    load_rows, maze_table
+    load_rows, maze_table, merge_rows
 from fmctd_dist.evaluation.results import summarise
 from fmctd_dist.errors import ConfigError
 
@@ -42,24 +44,29 @@ def parse(argv: list[str]) -> dict[str, str]:
 def main(argv: list[str]) -> int:
     opts = parse(argv)
     root, doc, figures = resolve_path(opts["results"]), resolve_path(opts["doc"]), resolve_path(opts["figures"])
-    if not root.is_dir():
-        raise ConfigError(f"report: results={root} does not exist; run jobs/eval.py first (eval.out=...)")
+    lean_path = doc.parent / "eval_rows.parquet"
+    committed = pq.read_table(lean_path).to_pylist() if lean_path.is_file() else []
+    if not root.is_dir() and not committed:
+        raise ConfigError(f"report: results={root} does not exist and there is no {lean_path}; "
+                          "run jobs/eval.py first (eval.out=...)")
+    fresh = load_rows(root) if root.is_dir() else []
     sections: dict[str, str] = {}
     all_rows = []
 
-    main_rows = load_rows(root, "main")
+    main_rows = merge_rows(committed, fresh, "main")
     all_rows += main_rows
     if main_rows:
         sections["maze"] = maze_table(main_rows)
         plot_success_vs_time(summarise(main_rows), figures / "success_vs_time.png")
         for env in ENV_ORDER:  # one Fast-MCTD plan per maze, drawn with what the controller executed
-            rs = sorted((r for r in main_rows if r["method"] == "fast-mctd" and r["env"] == env),
+            # committed rows carry no trajectories: a maze without fresh rows keeps its figure
+            rs = sorted((r for r in main_rows if r["method"] == "fast-mctd" and r["env"] == env and "plan_xy" in r),
                         key=lambda r: (not r["success"], r["task"], r["seed"]))
             if rs:
                 plot_episode(rs[0], maze_geometry(env), figures / f"plan_{env}.png")
 
     for ab in ABLATIONS:
-        rows = load_rows(root, ab.name)
+        rows = merge_rows(committed, fresh, ab.name)
         all_rows += rows
         if rows:
             sections[ab.name] = ablation_table(ab, rows)
@@ -69,11 +76,11 @@ def main(argv: list[str]) -> int:
     text = fill_markers(doc.read_text(), sections)
     doc.write_text(text)
     if all_rows:
-        lean = [{k: v for k, v in r.items() if k not in ("plan_xy", "traj_xy")} for r in all_rows]
-        pq.write_table(pa.Table.from_pylist(lean), doc.parent / "eval_rows.parquet")
+        keys = [k for k in dict.fromkeys(k for r in all_rows for k in r) if k not in ("plan_xy", "traj_xy")]
+        pq.write_table(pa.table({k: [r.get(k) for r in all_rows] for k in keys}), lean_path)  # union of columns
     for name, body in sections.items():
         print(f"## {name}\n{body}\n")
-    print(f"{len(all_rows)} rows from {root}; updated {len(sections)} blocks in "
+    print(f"{len(all_rows)} rows ({len(fresh)} fresh from {root}, the rest from {lean_path.name}); updated {len(sections)} blocks in "
           f"{doc.relative_to(REPO_ROOT) if doc.is_relative_to(REPO_ROOT) else doc}; figures in {figures}")
     return 0
 

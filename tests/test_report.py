@@ -3,7 +3,7 @@
 import pytest
 
 from fmctd_dist.evaluation.report import ABLATIONS, ablation_summary, ablation_table, fill_markers, load_rows, \
-    maze_table
+    maze_table, merge_rows
 from fmctd_dist.evaluation.results import ResultStore
 
 
@@ -49,3 +49,25 @@ def test_markers_replace_only_their_block_and_a_missing_block_is_an_error():
     assert fill_markers(out, {"maze": "| new |"}) == out  # idempotent
     with pytest.raises(KeyError, match="report:ablate-w"):
         fill_markers(doc, {"ablate-w": "x"})
+
+
+def test_merge_keeps_committed_rows_and_fresh_rows_replace_the_same_episode():
+    committed = [{**row(1, 0, False), "run": "main"}, {**row(2, 0, True), "run": "main"},
+                 {**row(1, 0, True), "run": "ablate-k/10"}]
+    fresh = [{**row(1, 0, True, t=7.0), "run": "main"}, {**row(3, 0, True), "run": "main"}]
+    merged = merge_rows(committed, fresh, "main")
+    assert [(r["task"], r["success"], r["plan_time_s"]) for r in merged] == [(1, True, 7.0), (2, True, 1.0),
+                                                                               (3, True, 1.0)]
+    assert [r["run"] for r in merge_rows(committed, fresh, "ablate-k")] == ["ablate-k/10"]
+
+
+def test_ablation_compares_settings_within_a_maze_not_across():
+    rows = [row(1, 0, True, t=t, env=env, parallel=k)
+            for env, times in (("pointmaze-giant", {200: 10.0, 10: 5.0}), ("pointmaze-medium", {200: 2.0, 10: 4.0}))
+            for k, t in times.items()]
+    summary = ablation_summary(rows, "parallel")
+    assert [(s["env"], s["value"]) for s in summary] == [("pointmaze-medium", 10), ("pointmaze-medium", 200),
+                                                         ("pointmaze-giant", 10), ("pointmaze-giant", 200)]
+    table = ablation_table(next(a for a in ABLATIONS if a.knob == "parallel"), rows)
+    assert "| 10 | fast-mctd / medium | 1 (1 x 1) | 100 ± 0 | 4.00 ± 0.00 | 2.00x |" in table
+    assert "| 10 | fast-mctd / giant | 1 (1 x 1) | 100 ± 0 | 5.00 ± 0.00 | 0.50x |" in table

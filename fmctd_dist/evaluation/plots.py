@@ -77,20 +77,31 @@ def plot_success_vs_time(summary: list[dict[str, Any]], path: Path) -> Path:
 
 
 def plot_ablation(summary: list[dict[str, Any]], knob: str, path: Path) -> Path:
-    """Success (left axis) and planning time (right axis) against one search knob, error bars over seeds.
+    """Success (left axis, solid) and planning time (right axis, dashed, log) against one search knob,
+    one colour per maze, error bars over seeds.
 
     Settings are evenly spaced and labelled with their values (K runs 1..400, H 1..10)."""
-    x = np.arange(len(summary))
-    fig, ax = plt.subplots(figsize=(5, 3.2))
-    ax.errorbar(x, [s["success"] for s in summary], yerr=[s["success_std"] for s in summary], marker="o",
-                color="tab:blue", capsize=3, label="success")
-    ax.set_ylabel("success (%)", color="tab:blue")
-    ax.set_ylim(-5, 105)
+    values = sorted({s["value"] for s in summary})
+    envs = list(dict.fromkeys(s["env"] for s in summary))  # ablation_summary's maze order
+    fig, ax = plt.subplots(figsize=(5.5, 3.4))
     ax2 = ax.twinx()
-    ax2.errorbar(x, [s["plan_time_s"] for s in summary], yerr=[s["plan_time_std"] for s in summary], marker="s",
-                 color="tab:orange", capsize=3, label="planning time")
-    ax2.set_ylabel("planning time (s)", color="tab:orange")
-    ax.set_xticks(x, [str(s["value"]) for s in summary])
+    for i, env in enumerate(envs):
+        ss = [s for s in summary if s["env"] == env]
+        x = [values.index(s["value"]) for s in ss]
+        color = plt.get_cmap("tab10")(i % 10)
+        label = env.replace("pointmaze-", "")
+        ax.errorbar(x, [s["success"] for s in ss], yerr=[s["success_std"] for s in ss], marker="o", color=color,
+                    capsize=3, label=f"{label}: success")
+        ax2.errorbar(x, [s["plan_time_s"] for s in ss], yerr=[s["plan_time_std"] for s in ss], marker="s", ls="--",
+                     color=color, capsize=3, label=f"{label}: planning time")
+    ax.set_ylabel("success (%), solid")
+    ax.set_ylim(-5, 105)
+    ax2.set_ylabel("planning time (s), dashed")
+    ax2.set_yscale("log")
+    ax.set_xticks(range(len(values)), [str(v) for v in values])
     ax.set_xlabel(knob)
     ax.grid(alpha=0.3)
+    handles = ax.get_legend_handles_labels()[0] + ax2.get_legend_handles_labels()[0]
+    ax.legend(handles, [h.get_label() for h in handles], fontsize=7, loc="upper center",
+              bbox_to_anchor=(0.5, -0.22), ncol=2)
     return _save(fig, path)

@@ -54,10 +54,31 @@ def load_rows(root: str | Path, prefix: str = "") -> list[dict[str, Any]]:
     out = []
     for f in sorted(root.glob("**/task=*/seed=*.parquet")):
         run = "/".join(f.relative_to(root).parts[:-4])
-        if not prefix or run == prefix or run.startswith(prefix + "/"):
+        if _in_run(run, prefix):
             for r in pq.read_table(f).to_pylist():
                 out.append({**r, "run": run})
     return out
+
+
+def _in_run(run: str, prefix: str) -> bool:
+    return not prefix or run == prefix or run.startswith(prefix + "/")
+
+
+def row_key(r: dict[str, Any]) -> tuple:
+    """An episode's identity across files: (run, method, env, task, seed)."""
+    return r["run"], r["method"], r["env"], int(r["task"]), int(r["seed"])
+
+
+def merge_rows(committed: list[dict[str, Any]], fresh: list[dict[str, Any]], prefix: str = "") -> list[dict[str, Any]]:
+    """The committed rows (``docs/eval_rows.parquet``, kept in git) under ``prefix``, with every episode
+    that also has a fresh row in ``results/`` replaced by it.
+
+    ``results/`` is not in git, so a session on a fresh machine has only the rows it ran; merging
+    lets it add rows to the tables without dropping the ones earlier sessions measured.
+    """
+    merged = {row_key(r): r for r in committed if _in_run(r["run"], prefix)}
+    merged.update((row_key(r), r) for r in fresh if _in_run(r["run"], prefix))
+    return [merged[k] for k in sorted(merged)]
 
 
 def _pm(mean: float, std: float, fmt: str = ".0f") -> str:
@@ -93,30 +114,37 @@ def maze_table(rows: list[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
+def _env_rank(env: str) -> tuple[int, str]:
+    return (ENV_ORDER.index(env) if env in ENV_ORDER else len(ENV_ORDER), env)
+
+
 def ablation_summary(rows: list[dict[str, Any]], knob: str) -> list[dict[str, Any]]:
-    """Per knob value: success and planning time (± std over seeds), expansions, iterations."""
-    values = sorted({r[knob] for r in rows if knob in r})
+    """Per (env, knob value), mazes in the paper's order: success and planning time (± std over
+    seeds), expansions, iterations. Settings are compared within a maze, never across."""
     out = []
-    for v in values:
-        rs = [r for r in rows if r.get(knob) == v]
-        s = summarise([{**r, "method": "x", "env": "x"} for r in rs])[0]
-        out.append({**s, "value": v, "method": sorted({r["method"] for r in rs}), "env": sorted({r["env"] for r in rs}),
-                    "expansions": float(np.mean([r["expansions"] for r in rs])),
-                    "iterations": float(np.mean([r["iterations"] for r in rs]))})
+    for env in sorted({r["env"] for r in rows}, key=_env_rank):
+        env_rows = [r for r in rows if r["env"] == env and knob in r]
+        for v in sorted({r[knob] for r in env_rows}):
+            rs = [r for r in env_rows if r[knob] == v]
+            s = summarise([{**r, "method": "x"} for r in rs])[0]
+            out.append({**s, "value": v, "method": sorted({r["method"] for r in rs}),
+                        "expansions": float(np.mean([r["expansions"] for r in rs])),
+                        "iterations": float(np.mean([r["iterations"] for r in rs]))})
     return out
 
 
 def ablation_table(ab: Ablation, rows: list[dict[str, Any]]) -> str:
     summary = ablation_summary(rows, ab.knob)
-    ref = next((s for s in summary if s["value"] == ab.default and type(s["value"]) is type(ab.default)), None)
+    refs = {s["env"]: s for s in summary if s["value"] == ab.default and type(s["value"]) is type(ab.default)}
     lines = [f"| {ab.knob} | method / env | episodes (tasks x seeds) | success (%) | planning time (s) | "
              f"time / default | expansions | iterations | in denoiser: compute / calls | paper (P-MCTD, PointMaze-giant) |",
              "|---|---|---|---|---|---|---|---|---|---|"]
     for s in summary:
+        ref = refs.get(s["env"])
         ratio = f"{s['plan_time_s'] / ref['plan_time_s']:.2f}x" if ref else "–"
         timed_out = f" ({s['timed_out']} timed out)" if s["timed_out"] else ""
         lines.append(
-            f"| {s['value']} | {','.join(s['method'])} / {','.join(e.replace('pointmaze-', '') for e in s['env'])} | "
+            f"| {s['value']} | {','.join(s['method'])} / {s['env'].replace('pointmaze-', '')} | "
             f"{s['episodes']} ({len(s['per_task'])} x {s['seeds']}) | {_pm(s['success'], s['success_std'])}{timed_out} | "
             f"{_pm(s['plan_time_s'], s['plan_time_std'], '.2f')} | {ratio} | {s['expansions']:.0f} | "
             f"{s['iterations']:.1f} | {_shares(s)} | {ab.paper.get(s['value'], '–')} |")
