@@ -101,6 +101,10 @@ class TrainConfig:
     seed: int = 0
     out: str = ""  # checkpoint dir; "" -> runs/<env>-h<jump> (ship with train.out=checkpoints/<env>-h<jump>)
     threads: int = 0  # torch intra-op threads; 0 = torch default
+    # A checkpoint dir whose weights start a fresh run (fine-tuning, e.g. an AntMaze model from the
+    # PointMaze one of the same maze): same architecture, any env / horizon. Recorded in the manifest;
+    # ignored when train.out already holds a run to resume.
+    init_from: str = ""
 
 
 @dataclass

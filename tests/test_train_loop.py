@@ -124,3 +124,24 @@ def test_shipped_checkpoint_without_train_state_is_continued_not_overwritten(tmp
     with pytest.raises(CheckpointError, match="dataset"):
         (tmp_path / "train_state.pt").unlink()
         train(tiny_cfg(30), FakeData(digest="other"), tmp_path, progress=False)
+
+
+def test_init_from_starts_a_new_env_and_horizon_from_another_checkpoints_weights(tmp_path):
+    src, dst = tmp_path / "point", tmp_path / "ant"
+    train(tiny_cfg(10), FakeData(), src, progress=False)
+    _, src_manifest = load_checkpoint(src, tiny_cfg(10))
+    # another maze, horizon (21 tokens instead of 11) and dataset; lr 0 keeps the weights as loaded
+    cfg = tiny_cfg(10, "env=pointmaze-giant", f"train.init_from={src}", "train.lr=0")
+    train(cfg, FakeData(n_tokens=21, digest="other-data"), dst, progress=False)
+    model, manifest = load_checkpoint(dst, cfg)
+    source, _ = load_checkpoint(src, tiny_cfg(10))
+    assert all(torch.equal(a, b) for a, b in zip(model.state_dict().values(), source.state_dict().values()))
+    assert manifest["init_from"]["digest"] == src_manifest["digest"] and manifest["init_from"]["train_steps"] == 10
+    assert "started from the weights of" in manifest["vs_paper"]
+
+
+def test_init_from_with_another_architecture_is_one_clear_error(tmp_path):
+    train(tiny_cfg(10), FakeData(), tmp_path / "src", progress=False)
+    cfg = tiny_cfg(10, "model.width=64", f"train.init_from={tmp_path / 'src'}")
+    with pytest.raises(CheckpointError, match=r"model.width=32 but the config has model.width=64"):
+        train(cfg, FakeData(), tmp_path / "dst", progress=False)

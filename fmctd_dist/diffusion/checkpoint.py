@@ -169,6 +169,30 @@ def load_checkpoint(ckpt_dir: str | Path, cfg: Config | None = None,
     return model.eval(), manifest
 
 
+def load_init_weights(ckpt_dir: str | Path, cfg: Config) -> tuple[dict[str, torch.Tensor], dict[str, Any]]:
+    """Weights to start a run from (``train.init_from``) -> (state_dict, provenance for the manifest).
+
+    Unlike :func:`load_checkpoint` the env, jump and horizon may differ (positions are
+    sinusoidal, so a transformer runs at any token count); the architecture must not.
+    """
+    ckpt_dir = Path(ckpt_dir)
+    manifest = read_manifest(ckpt_dir)
+    if sha256_file(ckpt_dir / MODEL_FILE) != manifest.get("model_sha256"):
+        raise CheckpointError(f"train.init_from={ckpt_dir}: {MODEL_FILE} does not match its manifest's sha256 "
+                              "(corrupt or overwritten); point train.init_from at an intact checkpoint")
+    saved = manifest.get("config", {}).get("model", {})
+    for f in _model_fields(cfg):
+        if saved.get(f) != getattr(cfg.model, f):
+            raise CheckpointError(f"train.init_from={ckpt_dir} has model.{f}={saved.get(f)!r} but the config has "
+                                  f"model.{f}={getattr(cfg.model, f)!r}; set model.{f}={saved.get(f)!r} or start "
+                                  "from scratch (train.init_from=)")
+    state = torch.load(ckpt_dir / MODEL_FILE, map_location="cpu", weights_only=True)
+    provenance = {"path": str(ckpt_dir.relative_to(REPO_ROOT) if ckpt_dir.is_relative_to(REPO_ROOT) else ckpt_dir),
+                  "digest": manifest["digest"], "env": manifest.get("config", {}).get("env", {}).get("name"),
+                  "jump": manifest.get("config", {}).get("jump"), "train_steps": manifest.get("train_steps")}
+    return state, provenance
+
+
 def model_from_manifest(manifest: dict[str, Any]) -> DFTransformer:
     """An untrained model of the architecture a manifest describes (any model.kind)."""
     return build_model(model_config_from_dict(manifest["config"]["model"]), manifest["n_tokens"],

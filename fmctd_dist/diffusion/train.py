@@ -18,11 +18,12 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from fmctd_dist.config import Config, git_sha
+from fmctd_dist.config import Config, git_sha, resolve_path
 from fmctd_dist.data.tokens import Normaliser
 from fmctd_dist.device import resolve_device, set_threads
 from fmctd_dist.diffusion.checkpoint import (
-    check_compatible, load_checkpoint, load_train_state, module_state, save_checkpoint, save_train_state,
+    check_compatible, load_checkpoint, load_init_weights, load_train_state, module_state, save_checkpoint,
+    save_train_state,
 )
 from fmctd_dist.diffusion.model import DFTransformer
 from fmctd_dist.diffusion.models import build_model
@@ -128,6 +129,8 @@ def vs_paper(cfg: Config, step: int) -> str:
         parts.append(f"U-Net channels {list(cfg.model.unet_channels)} (paper {paper['unet_channels']})")
     if "layers" in paper:
         parts.append(f"{cfg.model.layers} of the paper's {paper['layers']} layers (width {cfg.model.width})")
+    if cfg.train.init_from:
+        parts.append(f"started from the weights of {cfg.train.init_from} (its steps not counted here)")
     return "; ".join(parts)
 
 
@@ -163,6 +166,7 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
     rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence([tc.seed, data.seed])))
     gen = torch.Generator(device=device).manual_seed(tc.seed)
     step, wall, history, resumed_from = 0, 0.0, {"val": [], "train": []}, None
+    init_from = None  # provenance of train.init_from weights, kept by every later save and resume
     ema = copy.deepcopy(model).requires_grad_(False)  # what gets shipped (ema_decay=0: a plain copy)
 
     state = load_train_state(out_dir)
@@ -174,6 +178,7 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
         rng.bit_generator.state = state["numpy_rng"]
         gen.set_state(state["torch_rng"])
         step, wall, history = int(state["step"]), float(state["wall_time_s"]), state["history"]
+        init_from = state.get("init_from")
         resumed_from = step
         if step >= tc.max_steps:
             return _summary(step, wall, history, out_dir, model, resumed_from)
@@ -189,16 +194,23 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
         model.load_state_dict(shipped.state_dict())
         ema.load_state_dict(shipped.state_dict())
         step, wall = int(manifest["train_steps"]), float(manifest["wall_time_s"])
+        init_from = manifest.get("init_from")
         history = {"val": [list(v) for v in manifest.get("val_history", [])], "train": [],
                    "optimizer_reset_at": [step]}
         resumed_from = step
         if step >= tc.max_steps:
             return _summary(step, wall, history, out_dir, model, resumed_from)
+    elif tc.init_from:
+        weights, init_from = load_init_weights(resolve_path(tc.init_from), cfg)
+        model.load_state_dict(weights)
+        ema.load_state_dict(weights)
 
     val = [torch.as_tensor(v, dtype=torch.float32, device=device) for v in data.val_batches(tc.val_batches,
                                                                                         tc.batch_size)]
     base = {"dataset_digest": data.digest, "data_seed": data.seed, "git_sha": git_sha(),
             "normaliser": {"mean": data.normaliser.mean.tolist(), "std": data.normaliser.std.tolist()}}
+    if init_from is not None:
+        base["init_from"] = init_from
 
     def save() -> None:
         summary = _summary(step, wall, history, out_dir, model, resumed_from)
@@ -209,7 +221,7 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
             "model": module_state(model), "ema": module_state(ema), "optimizer": opt.state_dict(),
             "step": step, "wall_time_s": wall,
             "numpy_rng": rng.bit_generator.state, "torch_rng": gen.get_state(), "history": history,
-            "config": cfg.to_dict(), "dataset_digest": data.digest, "n_tokens": cfg.n_tokens,
+            "config": cfg.to_dict(), "dataset_digest": data.digest, "n_tokens": cfg.n_tokens, "init_from": init_from,
         })
 
     model.train()
