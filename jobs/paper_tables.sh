@@ -30,8 +30,9 @@ fi
 
 if [[ "$ONLY" == all || "$ONLY" == ablations ]]; then
   # The paper ablates on PointMaze-giant. Our giant checkpoint's plans all warp (docs/results.md
-  # section 4), so every setting there would read 0% at the full budget; we ablate on medium,
-  # where the search has valid plans to choose between (ABL_ENV overrides).
+  # section 4), so every setting there reads 0% at the full budget and only times differ; the
+  # default is medium, where the search has valid plans to choose between. The giant rows of
+  # docs/results.md section 10: ABL_ENV=pointmaze-giant SEEDS="[0]" LIMIT=150 ONLY=ablations.
   ABL_ENV="${ABL_ENV:-pointmaze-medium}"
   g="env=$ABL_ENV seeds=$SEEDS eval.episode_time_limit=$LIMIT"
   # The default setting (K=200, w=1, RAS on, no leaf parallelization, H=5) is one config: its

@@ -9,6 +9,7 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
+from matplotlib.ticker import FormatStrFormatter, LogLocator, NullFormatter  # noqa: E402
 import numpy as np  # noqa: E402
 
 from fmctd_dist.envs.maze import MAZE_UNIT, MazeGeometry  # noqa: E402
@@ -98,6 +99,9 @@ def plot_ablation(summary: list[dict[str, Any]], knob: str, path: Path) -> Path:
     ax.set_ylim(-5, 105)
     ax2.set_ylabel("planning time (s), dashed")
     ax2.set_yscale("log")
+    ax2.yaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))  # 1, 2, 5, 10, 20, 50, ... s
+    ax2.yaxis.set_major_formatter(FormatStrFormatter("%g"))
+    ax2.yaxis.set_minor_formatter(NullFormatter())
     ax.set_xticks(range(len(values)), [str(v) for v in values])
     ax.set_xlabel(knob)
     ax.grid(alpha=0.3)
