@@ -3,7 +3,7 @@
     python jobs/report.py                          # results/ -> docs/results.md + docs/figures/
     python jobs/report.py results=/tmp/res doc=/tmp/results.md
 
-Reads the run ``main`` (the maze table: every method x maze) and the ablation runs
+Reads the run ``main`` (the maze tables: every method x PointMaze / AntMaze maze) and the ablation runs
 ``ablate-w/*``, ``ablate-ras/*``, ``ablate-leaf/*``, ``ablate-k/*``, ``ablate-h/*`` (made by
 ``jobs/eval.py ... eval.run=ablate-k/10`` etc.; the commands are in docs/results.md), and
 rewrites only the blocks between ``<!-- report:NAME -->`` markers. Also writes
@@ -24,7 +24,7 @@ from fmctd_dist.cli import run
 from fmctd_dist.config import REPO_ROOT, resolve_path
 from fmctd_dist.envs import maze_geometry
 from fmctd_dist.evaluation.plots import plot_ablation, plot_episode, plot_success_vs_time
-from fmctd_dist.evaluation.report import ABLATIONS, ENV_ORDER, ablation_summary, ablation_table, fill_markers, \
+from fmctd_dist.evaluation.report import ABLATIONS, ANT_ENV_ORDER, ENV_ORDER, ablation_summary, ablation_table, fill_markers, \
     load_rows, maze_table, merge_rows
 from fmctd_dist.evaluation.results import summarise
 from fmctd_dist.errors import ConfigError
@@ -56,9 +56,11 @@ def main(argv: list[str]) -> int:
     main_rows = merge_rows(committed, fresh, "main")
     all_rows += main_rows
     if main_rows:
-        sections["maze"] = maze_table(main_rows)
-        plot_success_vs_time(summarise(main_rows), figures / "success_vs_time.png")
-        for env in ENV_ORDER:  # one Fast-MCTD plan per maze, drawn with what the controller executed
+        sections["maze"] = maze_table([r for r in main_rows if r["env"] in ENV_ORDER])
+        if any(r["env"] in ANT_ENV_ORDER for r in main_rows):
+            sections["antmaze"] = maze_table(main_rows, ANT_ENV_ORDER)
+        plot_success_vs_time(summarise([r for r in main_rows if r["env"] in ENV_ORDER]), figures / "success_vs_time.png")
+        for env in ENV_ORDER + ANT_ENV_ORDER:  # one Fast-MCTD plan per maze, drawn with what the controller executed
             # committed rows carry no trajectories: a maze without fresh rows keeps its figure
             rs = sorted((r for r in main_rows if r["method"] == "fast-mctd" and r["env"] == env and "plan_xy" in r),
                         key=lambda r: (not r["success"], r["task"], r["seed"]))

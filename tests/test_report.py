@@ -2,7 +2,7 @@
 
 import pytest
 
-from fmctd_dist.evaluation.report import ABLATIONS, ablation_summary, ablation_table, fill_markers, load_rows, \
+from fmctd_dist.evaluation.report import ABLATIONS, ANT_ENV_ORDER, ablation_summary, ablation_table, fill_markers, load_rows, \
     maze_table, merge_rows
 from fmctd_dist.evaluation.results import ResultStore
 
@@ -71,3 +71,12 @@ def test_ablation_compares_settings_within_a_maze_not_across():
     table = ablation_table(next(a for a in ABLATIONS if a.knob == "parallel"), rows)
     assert "| 10 | fast-mctd / medium | 1 (1 x 1) | 100 ± 0 | 4.00 ± 0.00 | 2.00x |" in table
     assert "| 10 | fast-mctd / giant | 1 (1 x 1) | 100 ± 0 | 5.00 ± 0.00 | 0.50x |" in table
+
+
+def test_antmaze_rows_get_their_own_table_with_the_papers_antmaze_numbers():
+    rows = [row(k, 0, k < 3, env="antmaze-medium") for k in (1, 2, 3, 4, 5)]
+    table = maze_table(rows, ANT_ENV_ORDER)
+    assert "| fast-mctd | antmaze-medium | 5 (5 x 1) | 40 ± 0 |" in table
+    assert "98 ± 6 / 2.2 ± 0.1 s" in table  # the paper's AntMaze Fast-MCTD, not its PointMaze 100 ± 0 / 3.6 s
+    assert "| mctd | antmaze-giant | not run | | | | | 94 ± 9 / 214.5 ± 11.0 s |" in table
+    assert "pointmaze" not in table

@@ -1,4 +1,4 @@
-"""The paper's PointMaze numbers (Table "Maze results"), printed beside ours in every report.
+"""The paper's PointMaze and AntMaze numbers (Table "Maze results"), printed beside ours in every report.
 
 (success %, success std, planning time s, time std) per (method, maze). Planning times are
 the authors' GPU times; compare ratios, not seconds, with our CPU runs.
@@ -14,11 +14,22 @@ PAPER_POINTMAZE: dict[str, dict[str, tuple[float, float, float, float]]] = {
     "fast-mctd": {"medium": (100, 0, 3.6, 0.6), "large": (80, 0, 4.1, 0.4), "giant": (100, 0, 2.4, 0.1)},
 }
 
+PAPER_ANTMAZE: dict[str, dict[str, tuple[float, float, float, float]]] = {
+    "diffuser": {"medium": (36, 15, 6.2, 0.1), "large": (14, 16, 6.5, 0.1), "giant": (0, 0, 6.5, 0.1)},
+    "diffuser-replan": {"medium": (40, 18, 60.3, 4.2), "large": (26, 13, 73.7, 1.9), "giant": (0, 0, 193.0, 0.4)},
+    "diffusion-forcing": {"medium": (90, 10, 14.0, 3.8), "large": (57, 6, 24.1, 1.8), "giant": (24, 12, 67.0, 3.4)},
+    "mctd": {"medium": (100, 0, 68.0, 3.8), "large": (98, 6, 132.1, 12.7), "giant": (94, 9, 214.5, 11.0)},
+    "p-mctd": {"medium": (96, 8, 2.8, 0.2), "large": (90, 10, 3.1, 0.1), "giant": (89, 16, 4.2, 0.1)},
+    "s-mctd": {"medium": (94, 1, 12.5, 0.7), "large": (68, 13, 40.1, 2.6), "giant": (82, 14, 40.3, 2.9)},
+    "fast-mctd": {"medium": (98, 6, 2.2, 0.1), "large": (77, 14, 2.2, 0.1), "giant": (90, 16, 2.5, 0.1)},
+}
+PAPER = {"pointmaze": PAPER_POINTMAZE, "antmaze": PAPER_ANTMAZE}
+
 
 def paper_cell(method: str, env: str) -> str:
     """'100 ± 0 / 3.6 ± 0.6 s' for a method and an env name like 'pointmaze-medium', or '–'."""
-    maze = env.rsplit("-", 1)[-1]
-    row = PAPER_POINTMAZE.get(method, {}).get(maze)
+    robot, _, maze = env.rpartition("-")
+    row = PAPER.get(robot, {}).get(method, {}).get(maze)
     if row is None:
         return "–"
     s, sd, t, td = row

@@ -23,6 +23,7 @@ from fmctd_dist.evaluation.results import summarise
 
 METHOD_ORDER = ["diffuser", "diffuser-replan", "diffusion-forcing", "mctd", "p-mctd", "s-mctd", "fast-mctd"]
 ENV_ORDER = ["pointmaze-medium", "pointmaze-large", "pointmaze-giant"]
+ANT_ENV_ORDER = ["antmaze-medium", "antmaze-large", "antmaze-giant"]
 
 
 @dataclass(frozen=True)
@@ -90,15 +91,15 @@ def _shares(s: dict[str, Any]) -> str:
     return f"{100 * s['denoise_share']:.1f}% / {calls}"
 
 
-def maze_table(rows: list[dict[str, Any]]) -> str:
-    """The paper's Table "Maze results": one line per (method, env) in the paper's order."""
+def maze_table(rows: list[dict[str, Any]], envs: list[str] = ENV_ORDER) -> str:
+    """The paper's Table "Maze results" for ``envs``: one line per (method, env) in the paper's order."""
     summary = summarise(rows)
     key = {(s["method"], s["env"]): s for s in summary}
     # "in denoiser": share of planning time spent computing inside denoiser actors / inside denoiser calls
     # (the latter adds queueing behind other env actors and Ray transport; "–" for rows recorded before it existed)
     lines = ["| method | env | episodes (tasks x seeds) | success (%) | planning time (s) | in denoiser: compute / calls | "
              "success per task | paper: success / time (GPU) |", "|---|---|---|---|---|---|---|---|"]
-    for env in ENV_ORDER:
+    for env in envs:
         for m in METHOD_ORDER:
             s = key.get((m, env))
             if s is None:
@@ -115,7 +116,8 @@ def maze_table(rows: list[dict[str, Any]]) -> str:
 
 
 def _env_rank(env: str) -> tuple[int, str]:
-    return (ENV_ORDER.index(env) if env in ENV_ORDER else len(ENV_ORDER), env)
+    order = ENV_ORDER + ANT_ENV_ORDER
+    return (order.index(env) if env in order else len(order), env)
 
 
 def ablation_summary(rows: list[dict[str, Any]], knob: str) -> list[dict[str, Any]]:
