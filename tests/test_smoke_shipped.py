@@ -1,5 +1,5 @@
-"""End to end with shipped checkpoints: Fast-MCTD solves PointMaze-medium task 1, seed 0, on CPU;
-the shipped Diffuser's plan for that task is warp-free."""
+"""End to end with shipped checkpoints: Fast-MCTD solves PointMaze-medium and AntMaze-medium task 1,
+seed 0, on CPU; the shipped Diffuser's plan for that task is warp-free."""
 
 import numpy as np
 import pytest
@@ -24,6 +24,18 @@ def test_fast_mctd_solves_medium_task1_seed0():
     assert row["success"], row["plan_status"]
     assert row["env_steps"] <= 500 and row["plans"] == 1
     assert row["denoise_share"] > 0.9  # the search is almost all denoiser
+
+
+@pytest.mark.slow
+def test_fast_mctd_with_the_shipped_ant_policy_solves_antmaze_medium_task1_seed0():
+    cfg = load_config(["method=fast-mctd", "env=antmaze-medium"])
+    model, manifest = load_checkpoint(cfg.checkpoint_dir(), cfg)
+    with torch_threads(2):
+        denoiser = LocalDenoiser(model, cfg.diffusion, "cpu", cfg.ray.micro_batch)
+        planner = make_planner(cfg, denoiser, normaliser_from_manifest(manifest))
+        row = run_episode(cfg, make_env(cfg.env.name), planner, task=1, seed=0)
+    assert row["success"], row["plan_status"]  # within OGBench's 0.5 of the goal, walked by the policy
+    assert row["env_steps"] <= 500 and row["plans"] == 1
 
 
 DIFFUSER_MEDIUM = load_config(["method=diffuser", "env=pointmaze-medium"]).checkpoint_dir()
