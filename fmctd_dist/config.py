@@ -26,6 +26,7 @@ CONFIG_DIR = REPO_ROOT / "configs"
 
 MAZES = ("medium", "large", "giant")
 POINT_ENVS = tuple(f"pointmaze-{m}" for m in MAZES)
+UNET_PADDINGS = ("zeros", "replicate")
 ANT_ENVS = tuple(f"antmaze-{m}" for m in MAZES)
 ENV_NAMES = POINT_ENVS + ANT_ENVS
 TASK_IDS = (1, 2, 3, 4, 5)
@@ -73,6 +74,9 @@ class ModelConfig:
     ff: int = 512  # feed-forward width (paper 512)
     unet_channels: list[int] = field(default_factory=lambda: [32, 128, 256])  # kind=diffuser: widths per resolution
     unet_kernel: int = 5  # kind=diffuser: temporal conv kernel size
+    # kind=diffuser: how the convs pad the time axis. zeros (Janner's): the frames before the start
+    # read as the normalised origin; replicate: as the start itself (see docs/results.md section 3.1)
+    unet_padding: str = "zeros"
 
 
 @dataclass
@@ -356,6 +360,9 @@ def validate(cfg: Config) -> None:
                               "(GroupNorm with 8 groups), e.g. [32, 128, 256]")
         if k < 1 or k % 2 == 0:
             raise ConfigError(f"model.unet_kernel={k} must be a positive odd number (same-length convs), e.g. 5")
+        if cfg.model.unet_padding not in UNET_PADDINGS:
+            raise ConfigError(f"model.unet_padding={cfg.model.unet_padding!r} is not one of {list(UNET_PADDINGS)}; "
+                              "zeros is Janner's U-Net, replicate pads with the edge frames")
     _positive(cfg, "jump", "env.max_steps", "env.horizon", "model.frame_stack", "data.episodes",
               "data.episode_steps", "data.train_window", "train.max_steps", "train.batch_size",
               "train.ckpt_every", "method.parallel", "method.budget", "method.segment_transitions",

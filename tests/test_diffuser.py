@@ -230,3 +230,32 @@ def test_bad_diffuser_configs():
         load_config(["method=diffuser", "model.unet_channels=[12,24]"])
     with pytest.raises(ConfigError, match="odd"):
         load_config(["method=diffuser", "model.unet_kernel=4"])
+    with pytest.raises(ConfigError, match="model.unet_padding='reflect'"):
+        load_config(["method=diffuser", "model.unet_padding=reflect"])
+
+
+def test_replicate_padding_reads_the_frames_before_the_start_as_the_start():
+    """A trajectory resting at its start: with replicate padding every conv sees the same frames at the
+    edges as in the middle, with zeros padding the edges see the normalised origin."""
+    torch.manual_seed(0)
+    zeros = build_model(ModelConfig(kind="diffuser", frame_stack=1, unet_channels=[8, 16]), 32).eval()
+    rep = build_model(ModelConfig(kind="diffuser", frame_stack=1, unet_channels=[8, 16], unet_padding="replicate"),
+                      32).eval()
+    rep.load_state_dict(zeros.state_dict())  # padding is not in the state_dict: same weights
+    still = torch.tensor([1.5, -2.0]).expand(1, 32, 2).transpose(1, 2)  # [B, D, T], constant in time
+    with torch.no_grad():
+        r, z = rep.downs[0][0].block1.conv(still), zeros.downs[0][0].block1.conv(still)
+    assert torch.allclose(r, r[..., 16:17].expand_as(r), atol=1e-5)  # no edge effect
+    assert (z[..., 0] - z[..., 16]).abs().max() > 1e-3  # Janner's zeros: the first frame differs
+    assert torch.allclose(z[..., 4:-4], r[..., 4:-4], atol=1e-5)  # identical away from the edges
+
+
+def test_old_manifests_without_unet_padding_load_as_zeros_and_a_mismatch_is_named(diffuser_checkpoint):
+    args, ckpt, _ = diffuser_checkpoint
+    manifest = json.loads((ckpt / "manifest.json").read_text())
+    assert manifest["config"]["model"]["unet_padding"] == "zeros"
+    del manifest["config"]["model"]["unet_padding"]  # as written before the field existed
+    (ckpt / "manifest.json").write_text(json.dumps(manifest))
+    load_checkpoint(ckpt, load_config(args))
+    with pytest.raises(CheckpointError, match="model.unet_padding=None|model.unet_padding='zeros' but the config"):
+        load_checkpoint(ckpt, load_config(args + ["model.unet_padding=replicate"]))

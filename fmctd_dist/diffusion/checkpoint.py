@@ -9,6 +9,7 @@ code). Files are written to ``*.tmp`` and ``os.replace``d, so a kill never leave
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import os
@@ -30,11 +31,18 @@ MANIFEST_FILE = "manifest.json"
 TRAIN_STATE_FILE = "train_state.pt"
 FORMAT_VERSION = 1
 MODEL_FIELDS = ("kind", "frame_stack", "width", "layers", "heads", "ff")
-UNET_FIELDS = ("unet_channels", "unet_kernel")  # also checked when model.kind=diffuser
+UNET_FIELDS = ("unet_channels", "unet_kernel", "unet_padding")  # also checked when model.kind=diffuser
+SHAPE_FREE_FIELDS = ("unet_padding",)  # fields a state_dict does not depend on: train.init_from may change them
 
 
 def _model_fields(cfg: Config) -> tuple[str, ...]:
     return MODEL_FIELDS + (UNET_FIELDS if cfg.model.kind == "diffuser" else ())
+
+
+def _saved_model(manifest: dict[str, Any]) -> dict[str, Any]:
+    """A manifest's model config, with the defaults of fields added since it was written (unet_padding)."""
+    d = manifest.get("config", {}).get("model", {})
+    return {**dataclasses.asdict(ModelConfig()), **d} if d else {}
 
 
 def sha256_file(path: str | Path) -> str:
@@ -125,8 +133,9 @@ def read_manifest(ckpt_dir: str | Path, cfg: Config | None = None) -> dict[str, 
 def check_compatible(manifest: dict[str, Any], cfg: Config, where: str | Path) -> None:
     """Raise one CheckpointError naming the first field where checkpoint and config disagree."""
     saved = manifest.get("config", {})
+    saved_model = _saved_model(manifest)
     pairs = [("env.name", saved.get("env", {}).get("name"), cfg.env.name), ("jump", saved.get("jump"), cfg.jump)]
-    pairs += [(f"model.{f}", saved.get("model", {}).get(f), getattr(cfg.model, f)) for f in _model_fields(cfg)]
+    pairs += [(f"model.{f}", saved_model.get(f), getattr(cfg.model, f)) for f in _model_fields(cfg)]
     pairs += [("n_tokens", manifest.get("n_tokens"), cfg.n_tokens)]
     for name, have, want in pairs:
         if have != want:
@@ -180,9 +189,9 @@ def load_init_weights(ckpt_dir: str | Path, cfg: Config) -> tuple[dict[str, torc
     if sha256_file(ckpt_dir / MODEL_FILE) != manifest.get("model_sha256"):
         raise CheckpointError(f"train.init_from={ckpt_dir}: {MODEL_FILE} does not match its manifest's sha256 "
                               "(corrupt or overwritten); point train.init_from at an intact checkpoint")
-    saved = manifest.get("config", {}).get("model", {})
+    saved = _saved_model(manifest)
     for f in _model_fields(cfg):
-        if saved.get(f) != getattr(cfg.model, f):
+        if f not in SHAPE_FREE_FIELDS and saved.get(f) != getattr(cfg.model, f):
             raise CheckpointError(f"train.init_from={ckpt_dir} has model.{f}={saved.get(f)!r} but the config has "
                                   f"model.{f}={getattr(cfg.model, f)!r}; set model.{f}={saved.get(f)!r} or start "
                                   "from scratch (train.init_from=)")

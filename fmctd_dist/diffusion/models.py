@@ -28,7 +28,8 @@ def build_model(model_cfg: ModelConfig, n_tokens: int, token_dim: int | None = N
         return DFTransformer(dim, n_tokens, model_cfg.width, model_cfg.layers, model_cfg.heads, model_cfg.ff,
                              model_cfg.kind)
     if model_cfg.kind == "diffuser":
-        return TemporalUnet(dim, n_tokens, list(model_cfg.unet_channels), model_cfg.unet_kernel, model_cfg.kind)
+        return TemporalUnet(dim, n_tokens, list(model_cfg.unet_channels), model_cfg.unet_kernel, model_cfg.kind,
+                            model_cfg.unet_padding)
     raise unknown_name("model.kind", model_cfg.kind, MODEL_KINDS)
 
 

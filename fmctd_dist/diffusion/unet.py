@@ -32,9 +32,9 @@ GROUPS = 8  # GroupNorm groups (Janner's n_groups)
 class ConvBlock(nn.Module):
     """Conv1d (same length) -> GroupNorm -> Mish. [B, C_in, T] -> [B, C_out, T]."""
 
-    def __init__(self, c_in: int, c_out: int, kernel: int):
+    def __init__(self, c_in: int, c_out: int, kernel: int, padding: str = "zeros"):
         super().__init__()
-        self.conv = nn.Conv1d(c_in, c_out, kernel, padding=kernel // 2)
+        self.conv = nn.Conv1d(c_in, c_out, kernel, padding=kernel // 2, padding_mode=padding)
         self.norm = nn.GroupNorm(GROUPS, c_out)
 
     def forward(self, h: torch.Tensor) -> torch.Tensor:
@@ -44,10 +44,10 @@ class ConvBlock(nn.Module):
 class ResidualTemporalBlock(nn.Module):
     """Two conv blocks, time embedding added after the first, 1x1-conv residual. h: [B, C, T], e: [B, E]."""
 
-    def __init__(self, c_in: int, c_out: int, embed_dim: int, kernel: int):
+    def __init__(self, c_in: int, c_out: int, embed_dim: int, kernel: int, padding: str = "zeros"):
         super().__init__()
-        self.block1 = ConvBlock(c_in, c_out, kernel)
-        self.block2 = ConvBlock(c_out, c_out, kernel)
+        self.block1 = ConvBlock(c_in, c_out, kernel, padding)
+        self.block2 = ConvBlock(c_out, c_out, kernel, padding)
         self.time = nn.Sequential(nn.Mish(), nn.Linear(embed_dim, c_out))
         self.residual = nn.Conv1d(c_in, c_out, 1) if c_in != c_out else nn.Identity()
 
@@ -63,7 +63,7 @@ class TemporalUnet(nn.Module):
     """
 
     def __init__(self, token_dim: int, n_tokens: int, channels: tuple[int, ...] | list[int] = (32, 128, 256),
-                 kernel: int = 5, kind: str = "diffuser"):
+                 kernel: int = 5, kind: str = "diffuser", padding: str = "zeros"):
         super().__init__()
         channels = [int(c) for c in channels]
         assert channels and all(c % GROUPS == 0 for c in channels), f"channels {channels}: multiples of {GROUPS}"
@@ -81,20 +81,20 @@ class TemporalUnet(nn.Module):
         for i, (c_in, c_out) in enumerate(pairs):
             last = i == len(pairs) - 1
             self.downs.append(nn.ModuleList([
-                ResidualTemporalBlock(c_in, c_out, dim, kernel),
-                ResidualTemporalBlock(c_out, c_out, dim, kernel),
-                nn.Identity() if last else nn.Conv1d(c_out, c_out, 3, stride=2, padding=1),
+                ResidualTemporalBlock(c_in, c_out, dim, kernel, padding),
+                ResidualTemporalBlock(c_out, c_out, dim, kernel, padding),
+                nn.Identity() if last else nn.Conv1d(c_out, c_out, 3, stride=2, padding=1, padding_mode=padding),
             ]))
-        self.mid1 = ResidualTemporalBlock(channels[-1], channels[-1], dim, kernel)
-        self.mid2 = ResidualTemporalBlock(channels[-1], channels[-1], dim, kernel)
+        self.mid1 = ResidualTemporalBlock(channels[-1], channels[-1], dim, kernel, padding)
+        self.mid2 = ResidualTemporalBlock(channels[-1], channels[-1], dim, kernel, padding)
         self.ups = nn.ModuleList()
         for c_in, c_out in reversed(pairs[1:]):
             self.ups.append(nn.ModuleList([
-                ResidualTemporalBlock(2 * c_out, c_in, dim, kernel),
-                ResidualTemporalBlock(c_in, c_in, dim, kernel),
+                ResidualTemporalBlock(2 * c_out, c_in, dim, kernel, padding),
+                ResidualTemporalBlock(c_in, c_in, dim, kernel, padding),
                 nn.ConvTranspose1d(c_in, c_in, 4, stride=2, padding=1),
             ]))
-        self.final = nn.Sequential(ConvBlock(dim, dim, kernel), nn.Conv1d(dim, token_dim, 1))
+        self.final = nn.Sequential(ConvBlock(dim, dim, kernel, padding), nn.Conv1d(dim, token_dim, 1))
 
     def forward(self, x: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
         assert x.ndim == 3 and x.shape[-1] == self.token_dim and t.shape == x.shape[:2], (
