@@ -5,7 +5,8 @@
 Feeds 16 validation windows noised to timestep k (plan frames noisy, start clean, exactly as in
 training) and prints, in world units: the x0 error at plan frame 1, frame 2, mid-plan and the last
 frame, and how far the frame-1 prediction moves when the start is swapped for another window's.
-A model that uses the start has a small frame-1 error and moves frame 1 with the start.
+A model that uses the start has a small frame-1 error and moves frame 1 with the start. Then plans
+one guided plan per task and noise seed 0-2 and prints its first step and largest later step.
 """
 import sys, numpy as np, torch
 from fmctd_dist.config import load_config
@@ -39,3 +40,22 @@ with torch.no_grad():
     mv = ((ps - pred)[:, 1].numpy() * std); dstart = ((x0.roll(1,0)[:,0]-x0[:,0]).numpy()*std)
     print(f"k {k:3d}: err frame1 {err[:,1].mean():.2f} frame2 {err[:,2].mean():.2f} mid {err[:,250].mean():.2f} last {err[:,-1].mean():.2f}; "
           f"start moved {np.linalg.norm(dstart,axis=1).mean():.2f} -> frame1 moved {np.linalg.norm(mv,axis=1).mean():.2f}")
+
+# What that does to plans: the first step of a guided plan (start -> plan frame 1) and the largest
+# step after it, per task, for noise seeds 0-2 (the warp threshold is 1.0).
+from fmctd_dist.denoiser.local import LocalDenoiser  # noqa: E402
+from fmctd_dist.diffusion.checkpoint import normaliser_from_manifest  # noqa: E402
+from fmctd_dist.envs import make_env  # noqa: E402
+from fmctd_dist.planners import make_planner  # noqa: E402
+
+env = make_env(cfg.env.name)
+planner = make_planner(cfg, LocalDenoiser(model, cfg.diffusion, "cpu", 1), normaliser_from_manifest(manifest))
+for task in range(1, 6):
+    reset = env.reset(task, 0)
+    cells = []
+    for seed in range(3):
+        path = np.concatenate([reset.obs[None], planner.plan(reset.obs, reset.goal, seed=seed).waypoints])
+        steps = np.linalg.norm(np.diff(path, axis=0), axis=1)
+        cells.append(f"{steps[0]:.2f} / {steps[1:].max():.2f}")
+    print(f"task {task} (guidance {cfg.method.guidance_scale}): first step / largest later step, seeds 0-2: "
+          + ", ".join(cells))
