@@ -13,14 +13,19 @@ from fmctd_dist.evaluation.episode import run_episode
 from fmctd_dist.planners import make_planner
 
 
-@pytest.mark.slow
-def test_fast_mctd_solves_medium_task1_seed0():
-    cfg = load_config(["method=fast-mctd", "env=pointmaze-medium"])
+def shipped_fast_mctd_episode(env: str, task: int = 1, seed: int = 0) -> dict:
+    """One Fast-MCTD episode in process with the shipped checkpoint (and, for the ant, the shipped policy)."""
+    cfg = load_config(["method=fast-mctd", f"env={env}"])
     model, manifest = load_checkpoint(cfg.checkpoint_dir(), cfg)
     with torch_threads(2):
         denoiser = LocalDenoiser(model, cfg.diffusion, "cpu", cfg.ray.micro_batch)
         planner = make_planner(cfg, denoiser, normaliser_from_manifest(manifest))
-        row = run_episode(cfg, make_env(cfg.env.name), planner, task=1, seed=0)
+        return run_episode(cfg, make_env(cfg.env.name), planner, task=task, seed=seed)
+
+
+@pytest.mark.slow
+def test_fast_mctd_solves_medium_task1_seed0():
+    row = shipped_fast_mctd_episode("pointmaze-medium")
     assert row["success"], row["plan_status"]
     assert row["env_steps"] <= 500 and row["plans"] == 1
     assert row["denoise_share"] > 0.9  # the search is almost all denoiser
@@ -28,12 +33,7 @@ def test_fast_mctd_solves_medium_task1_seed0():
 
 @pytest.mark.slow
 def test_fast_mctd_with_the_shipped_ant_policy_solves_antmaze_medium_task1_seed0():
-    cfg = load_config(["method=fast-mctd", "env=antmaze-medium"])
-    model, manifest = load_checkpoint(cfg.checkpoint_dir(), cfg)
-    with torch_threads(2):
-        denoiser = LocalDenoiser(model, cfg.diffusion, "cpu", cfg.ray.micro_batch)
-        planner = make_planner(cfg, denoiser, normaliser_from_manifest(manifest))
-        row = run_episode(cfg, make_env(cfg.env.name), planner, task=1, seed=0)
+    row = shipped_fast_mctd_episode("antmaze-medium")
     assert row["success"], row["plan_status"]  # within OGBench's 0.5 of the goal, walked by the policy
     assert row["env_steps"] <= 500 and row["plans"] == 1
 
