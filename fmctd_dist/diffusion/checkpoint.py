@@ -146,6 +146,17 @@ def check_compatible(manifest: dict[str, Any], cfg: Config, where: str | Path) -
             )
 
 
+def _verified_sha(ckpt_dir: Path, manifest: dict[str, Any], where: str, fix: str) -> str:
+    """sha256 of ``model.pt``, or one CheckpointError if the manifest records another."""
+    sha = sha256_file(ckpt_dir / MODEL_FILE)
+    if sha != manifest.get("model_sha256"):
+        raise CheckpointError(
+            f"{where}: {MODEL_FILE} has sha256 {sha[:16]}... but manifest.json records "
+            f"{str(manifest.get('model_sha256'))[:16]}... (corrupt or overwritten); {fix}"
+        )
+    return sha
+
+
 def load_checkpoint(ckpt_dir: str | Path, cfg: Config | None = None,
                     expect_digest: str | None = None) -> tuple[DFTransformer, dict[str, Any]]:
     """Verify and load a checkpoint -> (model on CPU in eval mode, manifest).
@@ -156,12 +167,7 @@ def load_checkpoint(ckpt_dir: str | Path, cfg: Config | None = None,
     """
     ckpt_dir = Path(ckpt_dir)
     manifest = read_manifest(ckpt_dir, cfg)
-    sha = sha256_file(ckpt_dir / MODEL_FILE)
-    if sha != manifest.get("model_sha256"):
-        raise CheckpointError(
-            f"checkpoint {ckpt_dir}: {MODEL_FILE} has sha256 {sha[:16]}... but manifest.json records "
-            f"{str(manifest.get('model_sha256'))[:16]}... (corrupt or overwritten); {_train_fix(cfg)}"
-        )
+    sha = _verified_sha(ckpt_dir, manifest, f"checkpoint {ckpt_dir}", _train_fix(cfg))
     if expect_digest is not None and expect_digest not in (manifest["digest"], sha):
         raise CheckpointError(
             f"checkpoint {ckpt_dir}: digest {manifest['digest']} differs from the expected {expect_digest}; "
@@ -186,9 +192,7 @@ def load_init_weights(ckpt_dir: str | Path, cfg: Config) -> tuple[dict[str, torc
     """
     ckpt_dir = Path(ckpt_dir)
     manifest = read_manifest(ckpt_dir)
-    if sha256_file(ckpt_dir / MODEL_FILE) != manifest.get("model_sha256"):
-        raise CheckpointError(f"train.init_from={ckpt_dir}: {MODEL_FILE} does not match its manifest's sha256 "
-                              "(corrupt or overwritten); point train.init_from at an intact checkpoint")
+    _verified_sha(ckpt_dir, manifest, f"train.init_from={ckpt_dir}", "point train.init_from at an intact checkpoint")
     saved = _saved_model(manifest)
     for f in _model_fields(cfg):
         if f not in SHAPE_FREE_FIELDS and saved.get(f) != getattr(cfg.model, f):
