@@ -56,10 +56,11 @@ def main(argv: list[str]) -> int:
     main_rows = merge_rows(committed, fresh, "main")
     all_rows += main_rows
     if main_rows:
-        sections["maze"] = maze_table([r for r in main_rows if r["env"] in ENV_ORDER])
+        point_rows = [r for r in main_rows if r["env"] in ENV_ORDER]
+        sections["maze"] = maze_table(point_rows)
         if any(r["env"] in ANT_ENV_ORDER for r in main_rows):
             sections["antmaze"] = maze_table(main_rows, ANT_ENV_ORDER)
-        plot_success_vs_time(summarise([r for r in main_rows if r["env"] in ENV_ORDER]), figures / "success_vs_time.png")
+        plot_success_vs_time(summarise(point_rows), figures / "success_vs_time.png")
         for env in ENV_ORDER + ANT_ENV_ORDER:  # one Fast-MCTD plan per maze, drawn with what the controller executed
             # committed rows carry no trajectories: a maze without fresh rows keeps its figure
             rs = sorted((r for r in main_rows if r["method"] == "fast-mctd" and r["env"] == env and "plan_xy" in r),

@@ -18,12 +18,13 @@ from typing import Any
 import numpy as np
 import pyarrow.parquet as pq
 
+from fmctd_dist.config import ANT_ENVS, ENV_NAMES, POINT_ENVS
 from fmctd_dist.evaluation.paper import paper_cell
 from fmctd_dist.evaluation.results import summarise
 
 METHOD_ORDER = ["diffuser", "diffuser-replan", "diffusion-forcing", "mctd", "p-mctd", "s-mctd", "fast-mctd"]
-ENV_ORDER = ["pointmaze-medium", "pointmaze-large", "pointmaze-giant"]
-ANT_ENV_ORDER = ["antmaze-medium", "antmaze-large", "antmaze-giant"]
+ENV_ORDER = list(POINT_ENVS)  # the paper's order: medium, large, giant
+ANT_ENV_ORDER = list(ANT_ENVS)
 
 
 @dataclass(frozen=True)
@@ -116,8 +117,7 @@ def maze_table(rows: list[dict[str, Any]], envs: list[str] = ENV_ORDER) -> str:
 
 
 def _env_rank(env: str) -> tuple[int, str]:
-    order = ENV_ORDER + ANT_ENV_ORDER
-    return (order.index(env) if env in order else len(order), env)
+    return (ENV_NAMES.index(env) if env in ENV_NAMES else len(ENV_NAMES), env)
 
 
 def ablation_summary(rows: list[dict[str, Any]], knob: str) -> list[dict[str, Any]]:
