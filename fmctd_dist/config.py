@@ -109,6 +109,9 @@ class TrainConfig:
     # PointMaze one of the same maze): same architecture, any env / horizon. Recorded in the manifest;
     # ignored when train.out already holds a run to resume.
     init_from: str = ""
+    # Diffuser only (Janner et al.'s ``loss_discount``): plan frame f is weighted discount**f in the
+    # x0 loss (weights normalised to mean 1). 1.0 = uniform, the paper's and Janner's maze setting.
+    loss_discount: float = 1.0
 
 
 @dataclass
@@ -363,6 +366,9 @@ def validate(cfg: Config) -> None:
         if cfg.model.unet_padding not in UNET_PADDINGS:
             raise ConfigError(f"model.unet_padding={cfg.model.unet_padding!r} is not one of {list(UNET_PADDINGS)}; "
                               "zeros is Janner's U-Net, replicate pads with the edge frames")
+    if not 0.0 < cfg.train.loss_discount <= 1.0:
+        raise ConfigError(f"train.loss_discount={cfg.train.loss_discount} must be in (0, 1]: plan frame f is "
+                          "weighted discount**f (1.0 = uniform, the paper's setting)")
     _positive(cfg, "jump", "env.max_steps", "env.horizon", "model.frame_stack", "data.episodes",
               "data.episode_steps", "data.train_window", "train.max_steps", "train.batch_size",
               "train.ckpt_every", "method.parallel", "method.budget", "method.segment_transitions",

@@ -134,6 +134,32 @@ def test_diffuser_loss_uniform_timestep_and_clean_start():
     assert torch.equal(rec.x[:, 0], c.sqrt_ab_in[0] * x0[:, 0])  # fed exactly as the sampler feeds level 0
 
 
+def test_diffuser_loss_discount_weights_early_frames():
+    base = ["method=diffuser", "env.horizon=100", "data.train_window=100", "env.max_steps=100"]
+    flat = DiffuserLoss(load_config(base), torch.device("cpu"))
+    disc = DiffuserLoss(load_config(base + ["train.loss_discount=0.9"]), torch.device("cpu"))
+    w = disc.frame_weights(100, torch.device("cpu"))
+    assert abs(float(w.mean()) - 1.0) < 1e-5 and bool((w[1:] < w[:-1]).all())
+    assert torch.equal(flat.frame_weights(100, torch.device("cpu")), torch.ones(100))
+
+    class ErrAt(torch.nn.Module):  # x0 error only at one plan frame
+        def __init__(self, frame):
+            super().__init__()
+            self.frame = frame
+
+        def forward(self, x, t):
+            out = torch.zeros_like(x)
+            out[:, self.frame] = 1.0
+            return out
+
+    x0 = torch.zeros(2, 101, 2)
+    gen = lambda: torch.Generator().manual_seed(0)  # noqa: E731
+    assert float(flat(ErrAt(1), x0, gen())) == pytest.approx(float(flat(ErrAt(90), x0, gen())))
+    assert float(disc(ErrAt(1), x0, gen())) > 100 * float(disc(ErrAt(90), x0, gen()))
+    with pytest.raises(ConfigError, match="train.loss_discount"):
+        load_config(base + ["train.loss_discount=0"])
+
+
 # ---- training: train() + resume, and the job as a subprocess ----
 
 def test_tiny_diffuser_trains_and_resumes(tiny_dataset, tmp_path):

@@ -100,6 +100,12 @@ class DiffuserLoss(torch.nn.Module):
         self.timesteps = dc.timesteps
         self.t_start = dc.stabilization - 1  # the sampler's network timestep for a clean (level-0) token
         self.clip_noise = dc.clip_noise
+        self.discount = cfg.train.loss_discount
+
+    def frame_weights(self, plan_frames: int, device: torch.device) -> torch.Tensor:
+        """[plan_frames] Janner's loss_discount weights discount**f, mean 1 (all ones at 1.0)."""
+        w = self.discount ** torch.arange(plan_frames, dtype=torch.float64, device=device)
+        return (w / w.mean()).float()
 
     def forward(self, model: torch.nn.Module, x0: torch.Tensor, gen: torch.Generator) -> torch.Tensor:
         """x0: [B, T, D] clean normalised tokens (token 0 = start) -> scalar loss; randomness from ``gen``."""
@@ -110,7 +116,10 @@ class DiffuserLoss(torch.nn.Module):
         noise = torch.randn(x0.shape, generator=gen, device=dev).clamp(-self.clip_noise, self.clip_noise)
         xt = self.sqrt_ab[k][..., None] * x0 + self.sqrt_1m_ab[k][..., None] * noise
         xt = torch.cat((self.sqrt_ab[self.t_start] * x0[:, :1], xt[:, 1:]), dim=1)
-        return (model(xt, k)[:, 1:] - x0[:, 1:]).square().mean()
+        err = (model(xt, k)[:, 1:] - x0[:, 1:]).square()  # [B, T-1, D]
+        if self.discount == 1.0:
+            return err.mean()
+        return (self.frame_weights(t - 1, dev)[None, :, None] * err).mean()
 
 
 def make_loss(cfg: Config, device: torch.device) -> torch.nn.Module:
