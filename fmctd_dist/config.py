@@ -77,6 +77,10 @@ class ModelConfig:
     # kind=diffuser: how the convs pad the time axis. zeros (Janner's): the frames before the start
     # read as the normalised origin; replicate: as the start itself (see docs/results.md section 3.1)
     unet_padding: str = "zeros"
+    # kind=diffuser: frames added at each end of the sequence before the U-Net (point reflections
+    # 2 x_0 - x_i of the plan about its end frames, cropped after), so the plan's first and last
+    # frames are computed like interior ones. 0 = Janner's U-Net (see docs/results.md section 3.1)
+    unet_edge_frames: int = 0
 
 
 @dataclass
@@ -366,6 +370,9 @@ def validate(cfg: Config) -> None:
         if cfg.model.unet_padding not in UNET_PADDINGS:
             raise ConfigError(f"model.unet_padding={cfg.model.unet_padding!r} is not one of {list(UNET_PADDINGS)}; "
                               "zeros is Janner's U-Net, replicate pads with the edge frames")
+    if cfg.model.kind == "diffuser" and not 0 <= cfg.model.unet_edge_frames < cfg.plan_tokens:
+        raise ConfigError(f"model.unet_edge_frames={cfg.model.unet_edge_frames} must be in [0, {cfg.plan_tokens}) "
+                          "(fewer than the plan's frames); 0 is Janner's U-Net, 8 reflects 8 frames at each end")
     if not 0.0 < cfg.train.loss_discount <= 1.0:
         raise ConfigError(f"train.loss_discount={cfg.train.loss_discount} must be in (0, 1]: plan frame f is "
                           "weighted discount**f (1.0 = uniform, the paper's setting)")

@@ -258,6 +258,8 @@ def test_bad_diffuser_configs():
         load_config(["method=diffuser", "model.unet_kernel=4"])
     with pytest.raises(ConfigError, match="model.unet_padding='reflect'"):
         load_config(["method=diffuser", "model.unet_padding=reflect"])
+    with pytest.raises(ConfigError, match="model.unet_edge_frames=-1"):
+        load_config(["method=diffuser", "model.unet_edge_frames=-1"])
 
 
 def test_replicate_padding_reads_the_frames_before_the_start_as_the_start():
@@ -276,12 +278,33 @@ def test_replicate_padding_reads_the_frames_before_the_start_as_the_start():
     assert torch.allclose(z[..., 4:-4], r[..., 4:-4], atol=1e-5)  # identical away from the edges
 
 
+def test_edge_frames_continue_the_path_straight_and_are_cropped():
+    """On a straight path the reflected frames are its exact continuation, so a U-Net with
+    edge_frames=p on L frames computes what the plain U-Net computes on the L + 2p-frame path, cropped."""
+    torch.manual_seed(0)
+    plain = build_model(ModelConfig(kind="diffuser", frame_stack=1, unet_channels=[8, 16, 16]), 28).eval()
+    edged = build_model(ModelConfig(kind="diffuser", frame_stack=1, unet_channels=[8, 16, 16], unet_edge_frames=6),
+                        16).eval()
+    edged.load_state_dict(plain.state_dict())  # the edge frames are not in the state_dict: same weights
+    line = lambda n, first=0: torch.tensor([0.3, -1.0]) + 0.1 * torch.arange(  # noqa: E731
+        first, first + n, dtype=torch.float32)[:, None] * torch.tensor([1.0, 0.5])
+    t = lambda n: torch.full((1, n), 30)  # noqa: E731
+    with torch.no_grad():
+        out = edged(line(16)[None], t(16))
+        ref = plain(line(28, first=-6)[None], t(28))[:, 6:22]
+        assert out.shape == (1, 16, 2) and torch.allclose(out, ref, atol=1e-5)
+        assert not torch.allclose(plain(line(16)[None], t(16)), ref, atol=1e-3)  # without them the edges differ
+
+
 def test_old_manifests_without_unet_padding_load_as_zeros_and_a_mismatch_is_named(diffuser_checkpoint):
     args, ckpt, _ = diffuser_checkpoint
     manifest = json.loads((ckpt / "manifest.json").read_text())
     assert manifest["config"]["model"]["unet_padding"] == "zeros"
     del manifest["config"]["model"]["unet_padding"]  # as written before the field existed
+    del manifest["config"]["model"]["unet_edge_frames"]
     (ckpt / "manifest.json").write_text(json.dumps(manifest))
     load_checkpoint(ckpt, load_config(args))
     with pytest.raises(CheckpointError, match="model.unet_padding=None|model.unet_padding='zeros' but the config"):
         load_checkpoint(ckpt, load_config(args + ["model.unet_padding=replicate"]))
+    with pytest.raises(CheckpointError, match="unet_edge_frames"):
+        load_checkpoint(ckpt, load_config(args + ["model.unet_edge_frames=4"]))

@@ -31,8 +31,8 @@ MANIFEST_FILE = "manifest.json"
 TRAIN_STATE_FILE = "train_state.pt"
 FORMAT_VERSION = 1
 MODEL_FIELDS = ("kind", "frame_stack", "width", "layers", "heads", "ff")
-UNET_FIELDS = ("unet_channels", "unet_kernel", "unet_padding")  # also checked when model.kind=diffuser
-SHAPE_FREE_FIELDS = ("unet_padding",)  # fields a state_dict does not depend on: train.init_from may change them
+UNET_FIELDS = ("unet_channels", "unet_kernel", "unet_padding", "unet_edge_frames")  # checked when kind=diffuser
+SHAPE_FREE_FIELDS = ("unet_padding", "unet_edge_frames")  # fields a state_dict does not depend on: train.init_from may change them
 
 
 def _model_fields(cfg: Config) -> tuple[str, ...]:
@@ -40,7 +40,7 @@ def _model_fields(cfg: Config) -> tuple[str, ...]:
 
 
 def _saved_model(manifest: dict[str, Any]) -> dict[str, Any]:
-    """A manifest's model config, with the defaults of fields added since it was written (unet_padding)."""
+    """A manifest's model config, with the defaults of fields added since it was written (unet_padding, ...)."""
     d = manifest.get("config", {}).get("model", {})
     return {**dataclasses.asdict(ModelConfig()), **d} if d else {}
 

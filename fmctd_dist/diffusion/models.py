@@ -29,7 +29,7 @@ def build_model(model_cfg: ModelConfig, n_tokens: int, token_dim: int | None = N
                              model_cfg.kind)
     if model_cfg.kind == "diffuser":
         return TemporalUnet(dim, n_tokens, list(model_cfg.unet_channels), model_cfg.unet_kernel, model_cfg.kind,
-                            model_cfg.unet_padding)
+                            model_cfg.unet_padding, model_cfg.unet_edge_frames)
     raise unknown_name("model.kind", model_cfg.kind, MODEL_KINDS)
 
 

@@ -12,6 +12,11 @@ list [state_dim, 32, 128, 256]: 3 resolution levels, so the time axis is halved 
 (factor 4). The time axis is replicate-padded at the end to a multiple of that factor and
 the output cropped, so any trajectory length (501, 1001 tokens) works.
 
+``edge_frames`` > 0 (not in Janner's net) first extends the sequence at both ends by point
+reflections about its end frames, x_{-i} = 2 x_0 - x_i, a straight continuation of the path, and
+crops them again: the sequence edges, where this U-Net's convs and strided resampling are least
+accurate, then fall on frames that are thrown away (docs/results.md section 3.1).
+
 It has DFTransformer's call signature, ``forward(x [B, T, D], t [B, T]) -> x0_hat``, so the
 per-token sampler runs it unchanged. Plan tokens share one level per row in the Diffuser
 planner, so the network reads the timestep of the last token, ``t[:, -1]``; token 0 (the
@@ -63,8 +68,9 @@ class TemporalUnet(nn.Module):
     """
 
     def __init__(self, token_dim: int, n_tokens: int, channels: tuple[int, ...] | list[int] = (32, 128, 256),
-                 kernel: int = 5, kind: str = "diffuser", padding: str = "zeros"):
+                 kernel: int = 5, kind: str = "diffuser", padding: str = "zeros", edge_frames: int = 0):
         super().__init__()
+        self.edge_frames = int(edge_frames)
         channels = [int(c) for c in channels]
         assert channels and all(c % GROUPS == 0 for c in channels), f"channels {channels}: multiples of {GROUPS}"
         self.kind = kind
@@ -101,7 +107,10 @@ class TemporalUnet(nn.Module):
             f"x {tuple(x.shape)} / t {tuple(t.shape)}: expected [B, T, {self.token_dim}] / [B, T]"
         )
         length = x.shape[1]
-        pad = -length % self.factor
+        edge = min(self.edge_frames, length - 1)
+        if edge:
+            x = torch.cat((2 * x[:, :1] - x[:, 1:edge + 1].flip(1), x, 2 * x[:, -1:] - x[:, -edge - 1:-1].flip(1)), 1)
+        pad = -x.shape[1] % self.factor
         h = x.transpose(1, 2)  # [B, D, T]
         if pad:
             h = F.pad(h, (0, pad), mode="replicate")
@@ -115,7 +124,7 @@ class TemporalUnet(nn.Module):
         for block1, block2, up in self.ups:
             h = torch.cat((h, skips.pop()), dim=1)
             h = up(block2(block1(h, e), e))
-        return self.final(h)[..., :length].transpose(1, 2)
+        return self.final(h)[..., edge:edge + length].transpose(1, 2)
 
     def num_params(self) -> int:
         return sum(p.numel() for p in self.parameters())
