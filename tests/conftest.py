@@ -75,6 +75,9 @@ def ray_cluster():
 
     import ray
 
+    from fmctd_dist.evaluation.ray_runner import local_cluster_env
+
+    local_cluster_env()  # workers at nice 0, as for a cluster jobs/eval.py starts
     before = os.environ.get("RAY_AUTH_MODE")
     os.environ["RAY_AUTH_MODE"] = "disabled"
     ray.init(address="local", num_cpus=2, include_dashboard=False, logging_level=logging.ERROR, log_to_driver=False)

@@ -14,6 +14,7 @@ is left, one :class:`DeviceError` is raised -- never a hang.
 
 from __future__ import annotations
 
+import os
 import threading
 import time
 from dataclasses import dataclass, field
@@ -59,7 +60,8 @@ class DenoiserActor:
         torch.set_num_threads(max(1, int(cfg.ray.num_cpus)))
         self._info: dict[str, Any] = {"gpu_ids": [str(g) for g in ray.get_gpu_ids()],
                                       "cuda_device_count": torch.cuda.device_count(),
-                                      "torch_threads": torch.get_num_threads(), "requested_device": device}
+                                      "torch_threads": torch.get_num_threads(), "requested_device": device,
+                                      "niceness": os.nice(0)}
         self._error: FmctdError | None = None
         self._denoiser = None
         try:
@@ -75,10 +77,9 @@ class DenoiserActor:
             self._error = e
 
     def info(self) -> dict[str, Any]:
-        """What this actor sees: gpu_ids, cuda_device_count, device, torch_threads, pid, node."""
+        """What this actor sees: gpu_ids, cuda_device_count, device, torch_threads, niceness, pid, node."""
         if self._error is not None:
             raise self._error
-        import os
 
         return {**self._info, "pid": os.getpid(), "node_id": ray.get_runtime_context().get_node_id()}
 

@@ -131,6 +131,19 @@ def check_cluster(p: Prepared) -> None:
                           f"but the Ray cluster has {res.get('CPU', 0.0):g}; lower ray.denoiser_actors or ray.num_cpus")
 
 
+# Environment of a Ray cluster this process starts itself. Ray runs its workers at nice 15, so on
+# a shared machine a denoiser actor gets a few percent of a core whenever two nice-0 jobs run: one
+# Fast-MCTD plan took 162 s on Ray against 3.3 s in process (docs/results.md section 11.5). A cluster
+# we start runs its workers at the driver's priority; a cluster we join keeps its own setting.
+LOCAL_CLUSTER_ENV = {"RAY_worker_niceness": "0"}
+
+
+def local_cluster_env() -> None:
+    """Set LOCAL_CLUSTER_ENV before starting a local cluster (a value the user exported wins)."""
+    for key, value in LOCAL_CLUSTER_ENV.items():
+        os.environ.setdefault(key, value)
+
+
 def connect(address: str = "") -> bool:
     """Join ``address``, else a running cluster (RAY_ADDRESS / ``ray job submit`` / ``ray start``),
     else start a local one. Returns True when this call started Ray (the caller shuts it down)."""
@@ -144,6 +157,7 @@ def connect(address: str = "") -> bool:
         ray.init(address="auto", **quiet)
         return False
     except ConnectionError:
+        local_cluster_env()
         ray.init(include_dashboard=False, **quiet)
         return True
 
