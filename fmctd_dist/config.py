@@ -26,9 +26,9 @@ CONFIG_DIR = REPO_ROOT / "configs"
 
 MAZES = ("medium", "large", "giant")
 POINT_ENVS = tuple(f"pointmaze-{m}" for m in MAZES)
-UNET_PADDINGS = ("zeros", "replicate")
 ANT_ENVS = tuple(f"antmaze-{m}" for m in MAZES)
 ENV_NAMES = POINT_ENVS + ANT_ENVS
+UNET_PADDINGS = ("zeros", "replicate")
 TASK_IDS = (1, 2, 3, 4, 5)
 DEVICES = ("cpu", "cuda", "auto")
 RUNNERS = ("local", "ray")
@@ -370,9 +370,9 @@ def validate(cfg: Config) -> None:
         if cfg.model.unet_padding not in UNET_PADDINGS:
             raise ConfigError(f"model.unet_padding={cfg.model.unet_padding!r} is not one of {list(UNET_PADDINGS)}; "
                               "zeros is Janner's U-Net, replicate pads with the edge frames")
-    if cfg.model.kind == "diffuser" and not 0 <= cfg.model.unet_edge_frames < cfg.plan_tokens:
-        raise ConfigError(f"model.unet_edge_frames={cfg.model.unet_edge_frames} must be in [0, {cfg.plan_tokens}) "
-                          "(fewer than the plan's frames); 0 is Janner's U-Net, 8 reflects 8 frames at each end")
+        if not 0 <= cfg.model.unet_edge_frames < cfg.plan_tokens:
+                raise ConfigError(f"model.unet_edge_frames={cfg.model.unet_edge_frames} must be in [0, {cfg.plan_tokens}) "
+                              "(fewer than the plan's frames); 0 is Janner's U-Net, 8 reflects 8 frames at each end")
     if not 0.0 < cfg.train.loss_discount <= 1.0:
         raise ConfigError(f"train.loss_discount={cfg.train.loss_discount} must be in (0, 1]: plan frame f is "
                           "weighted discount**f (1.0 = uniform, the paper's setting)")

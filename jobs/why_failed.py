@@ -15,20 +15,21 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import pyarrow.parquet as pq
-
 from fmctd_dist.cli import run
 from fmctd_dist.errors import ConfigError
 from fmctd_dist.evaluation.diagnose import failures
+from fmctd_dist.evaluation.results import ResultStore
+
 
 def main(argv: list[str]) -> int:
     if not argv:
         raise ConfigError("why_failed: give one or more result dirs, e.g. results/main/fast-mctd/antmaze-medium")
     for d in map(Path, argv):
-        files = sorted(d.glob("task=*/seed=*.parquet"))
-        if not files:
+        full = d.resolve()  # <out>/<run>/<method>/<env>
+        rows = (ResultStore(full.parents[2], full.parents[1].name).rows(full.parent.name, full.name)
+                if len(full.parents) > 2 else [])
+        if not rows:
             raise ConfigError(f"why_failed: {d} has no task=*/seed=*.parquet rows (a <run>/<method>/<env> dir)")
-        rows = [r for f in files for r in pq.read_table(f).to_pylist()]
         fails = failures(rows)
         print(f"{d}: {len(fails)} of {len(rows)} episodes failed")
         for f in fails:

@@ -80,7 +80,6 @@ class DenoiserActor:
         """What this actor sees: gpu_ids, cuda_device_count, device, torch_threads, niceness, pid, node."""
         if self._error is not None:
             raise self._error
-
         return {**self._info, "pid": os.getpid(), "node_id": ray.get_runtime_context().get_node_id()}
 
     def denoise(self, batch: DenoiseBatch) -> DenoiseResult:
