@@ -116,6 +116,9 @@ class TrainConfig:
     # Diffuser only (Janner et al.'s ``loss_discount``): plan frame f is weighted discount**f in the
     # x0 loss (weights normalised to mean 1). 1.0 = uniform, the paper's and Janner's maze setting.
     loss_discount: float = 1.0
+    # Training windows drawn with weight count(start's 1x1 grid cell)**-start_balance (0 = uniform,
+    # the paper's). Leaves p(plan | start) unchanged; see fmctd_dist.data.windows.start_balance_cdf.
+    start_balance: float = 0.0
 
 
 @dataclass
@@ -376,6 +379,9 @@ def validate(cfg: Config) -> None:
     if not 0.0 < cfg.train.loss_discount <= 1.0:
         raise ConfigError(f"train.loss_discount={cfg.train.loss_discount} must be in (0, 1]: plan frame f is "
                           "weighted discount**f (1.0 = uniform, the paper's setting)")
+    if not 0.0 <= cfg.train.start_balance <= 1.0:
+        raise ConfigError(f"train.start_balance={cfg.train.start_balance} must be in [0, 1]: windows are drawn with "
+                          "weight count(start cell)**-start_balance (0 = uniform, the paper's; 1 = every start cell alike)")
     _positive(cfg, "jump", "env.max_steps", "env.horizon", "model.frame_stack", "data.episodes",
               "data.episode_steps", "data.train_window", "train.max_steps", "train.batch_size",
               "train.ckpt_every", "method.parallel", "method.budget", "method.segment_transitions",

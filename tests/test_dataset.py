@@ -10,8 +10,8 @@ from conftest import TINY_DATA
 from fmctd_dist.config import load_config
 from fmctd_dist.data.dataset import dataset_dir, load_dataset, make_dataset
 from fmctd_dist.data.tokens import Normaliser, PlanCodec, frames_to_tokens, tokens_to_frames
-from fmctd_dist.data.windows import WindowSampler, train_data
-from fmctd_dist.errors import DatasetError
+from fmctd_dist.data.windows import WindowSampler, start_balance_cdf, train_data
+from fmctd_dist.errors import ConfigError, DatasetError
 
 
 def test_same_seed_same_bytes(tiny_dataset, tmp_path):
@@ -118,3 +118,42 @@ def test_window_sampler_rejects_short_episodes():
     n = Normaliser.from_lists([0, 0], [1, 1])
     with pytest.raises(AssertionError):
         WindowSampler(np.zeros((2, 50, 2), np.float32), 100, 1, 10, n)
+
+
+def test_start_balance_weights_depend_on_the_start_cell_only():
+    """alpha 1: every occupied 1x1 start cell gets the same total mass; alpha 0.5: mass ~ sqrt(count)."""
+    # 3 episodes x 6 offsets: 12 starts in cell (0, 0), 4 in cell (5, 5), 2 in cell (9, 0)
+    starts = np.zeros((3, 6, 2))
+    starts[0] = [0.1, 0.2]
+    starts[1, :] = [0.5, 0.5]
+    starts[1, 2:] = [5.5, 5.5]
+    starts[2, :4] = [0.9, 0.9]
+    starts[2, 4:] = [9.2, 0.3]
+    cells = np.floor(starts.reshape(-1, 2)).astype(int)
+    for alpha, expect in ((1.0, [1 / 3] * 3), (0.5, np.sqrt([12, 4, 2]) / np.sqrt([12, 4, 2]).sum())):
+        w = np.diff(start_balance_cdf(starts, alpha), prepend=0.0)
+        mass = [w[(cells == c).all(axis=1)].sum() for c in ([0, 0], [5, 5], [9, 0])]
+        np.testing.assert_allclose(mass, expect, rtol=1e-9)
+        assert np.allclose(w[(cells == [0, 0]).all(axis=1)], w[0])  # same cell, same weight
+
+
+def test_start_balance_oversamples_rare_starts_and_zero_is_the_uniform_sampler(tiny_dataset):
+    cfg, _ = tiny_dataset
+    base = TINY_DATA + [f"data.root={cfg.data.root}"]
+    plain, bal = (train_data(c, load_dataset(c)) for c in (load_config(base, method="mctd"),
+                                                            load_config(base + ["train.start_balance=1"], method="mctd")))
+    # balance 0 draws exactly as before (rng.integers): bitwise the same batch as the uniform sampler
+    ref = plain.train.windows(np.random.default_rng(3).integers(0, plain.train.n_windows, size=64))
+    np.testing.assert_array_equal(plain.sample(np.random.default_rng(3), 64), ref)
+    # the rarest start cell's share of drawn windows grows with balance 1
+    starts = load_dataset(load_config(base, method="mctd")).train[:, : plain.train.offsets_per_episode]
+    cells = np.floor(starts.reshape(-1, 2)).astype(int)
+    _, inv, counts = np.unique(cells, axis=0, return_inverse=True, return_counts=True)
+    rare = counts[inv.reshape(-1)] == counts.min()
+    share = [rare[np.searchsorted(np.arange(1, plain.train.n_windows + 1) / plain.train.n_windows,
+                                  np.random.default_rng(0).random(20000), side="right")].mean(),
+             rare[np.searchsorted(bal.train._cdf, np.random.default_rng(0).random(20000), side="right")].mean()]
+    assert share[1] > 3 * share[0], share
+    assert np.array_equal(bal.val_batches(1, 4)[0], plain.val_batches(1, 4)[0])  # validation stays uniform
+    with pytest.raises(ConfigError, match="train.start_balance"):
+        load_config(base + ["train.start_balance=1.5"], method="mctd")

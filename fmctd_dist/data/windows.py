@@ -15,7 +15,8 @@ from fmctd_dist.data.tokens import Normaliser, context_token, frames_to_tokens
 class WindowSampler:
     """Draws [B, P+1, 2*frame_stack] normalised token windows from observations [E, S, 2]."""
 
-    def __init__(self, obs: np.ndarray, train_window: int, jump: int, frame_stack: int, normaliser: Normaliser):
+    def __init__(self, obs: np.ndarray, train_window: int, jump: int, frame_stack: int, normaliser: Normaliser,
+                 start_balance: float = 0.0):
         e, s, _ = obs.shape
         assert train_window % (jump * frame_stack) == 0, "train_window must be a multiple of jump * frame_stack"
         assert s >= train_window + 1, f"episodes of {s} steps are shorter than a window of {train_window + 1}"
@@ -24,6 +25,8 @@ class WindowSampler:
         self.normaliser = normaliser
         self.offsets_per_episode = s - train_window  # every offset, stride 1
         self.n_windows = e * self.offsets_per_episode
+        self.start_balance = start_balance
+        self._cdf = start_balance_cdf(obs[:, : self.offsets_per_episode], start_balance) if start_balance else None
 
     @property
     def n_tokens(self) -> int:
@@ -38,7 +41,29 @@ class WindowSampler:
         return np.concatenate([ctx, frames_to_tokens(frames[:, 1:], self.frame_stack)], axis=1).astype(np.float32)
 
     def sample(self, rng: np.random.Generator, batch: int) -> np.ndarray:
-        return self.windows(rng.integers(0, self.n_windows, size=batch))
+        if self._cdf is None:
+            return self.windows(rng.integers(0, self.n_windows, size=batch))
+        return self.windows(np.searchsorted(self._cdf, rng.random(batch), side="right"))
+
+
+BALANCE_BIN = 1.0  # world units: the grid on which start density is counted (a quarter of a maze cell)
+
+
+def start_balance_cdf(starts: np.ndarray, alpha: float) -> np.ndarray:
+    """Cumulative sampling weights [E*O] of windows whose first frames are ``starts`` [E, O, 2].
+
+    A window is drawn with weight count(its start's grid cell)**-alpha, so rarely visited starts
+    (a dead-end corner the oracle only touches on its way back) are seen more often. Why it is
+    safe: the weight depends on the start alone, so p(trajectory | start), the only thing a
+    planner that inpaints the start samples from, is unchanged; only the marginal of starts moves.
+    alpha 0 = uniform (Janner's), 1 = every occupied grid cell equally often.
+    """
+    xy = starts.reshape(-1, starts.shape[-1])
+    ij = np.floor(xy / BALANCE_BIN).astype(np.int64)
+    _, inverse, counts = np.unique(ij, axis=0, return_inverse=True, return_counts=True)
+    w = counts[inverse.reshape(-1)].astype(np.float64) ** -alpha
+    cdf = np.cumsum(w)
+    return cdf / cdf[-1]
 
 
 class TrainData:
@@ -66,4 +91,5 @@ def train_data(cfg, dataset) -> TrainData:
     """Build train/val samplers for ``cfg`` (jump, window, frame stack) over a NavigateDataset."""
     kw = dict(train_window=cfg.data.train_window, jump=cfg.jump, frame_stack=cfg.model.frame_stack,
               normaliser=dataset.normaliser)
-    return TrainData(WindowSampler(dataset.train, **kw), WindowSampler(dataset.val, **kw), dataset.digest, cfg.data.seed)
+    train = WindowSampler(dataset.train, **kw, start_balance=cfg.train.start_balance)
+    return TrainData(train, WindowSampler(dataset.val, **kw), dataset.digest, cfg.data.seed)  # val stays uniform
