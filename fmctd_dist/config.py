@@ -141,6 +141,8 @@ class MethodConfig:
     early_stop: bool = True  # stop when a new node's own plan reaches the goal
     replan_every: int = 0  # env steps between replans; 0 = plan once (open loop)
     guidance_scale: float = 2.0  # fixed scale for planners without search
+    # Diffuser only: RePaint resampling U (each level re-visited U times; 1 = plain DDIM, the paper's)
+    resample: int = 1
 
 
 @dataclass
@@ -385,7 +387,7 @@ def validate(cfg: Config) -> None:
     _positive(cfg, "jump", "env.max_steps", "env.horizon", "model.frame_stack", "data.episodes",
               "data.episode_steps", "data.train_window", "train.max_steps", "train.batch_size",
               "train.ckpt_every", "method.parallel", "method.budget", "method.segment_transitions",
-              "method.sim_skip", "ray.denoiser_actors", "ray.env_actors", "ray.micro_batch",
+              "method.sim_skip", "method.resample", "ray.denoiser_actors", "ray.env_actors", "ray.micro_batch",
               "ray.call_timeout_s", "diffusion.levels", "diffusion.timesteps")
     _non_negative(cfg, "data.seed", "train.seed", "seed", "method.virtual_weight", "data.noise",
                   "method.replan_every", "eval.episode_time_limit", "ray.num_gpus",

@@ -114,6 +114,17 @@ def test_unet_reads_one_timestep_per_row():
 def test_uniform_levels():
     lv = uniform_levels(3, 4)
     assert lv.tolist() == [[0, 4, 4, 4], [0, 3, 3, 3], [0, 2, 2, 2], [0, 1, 1, 1], [0, 0, 0, 0]]
+    assert np.array_equal(uniform_levels(3, 4, resample=1), lv)
+
+
+def test_uniform_levels_with_resampling():
+    """RePaint U=3 over 4 levels: each level above 0 is reached 3 times, by 3 + 2 x 2 ... model calls."""
+    lv = uniform_levels(2, 4, resample=3)
+    assert lv[:, 1].tolist() == [4, 3, 4, 3, 4, 3, 2, 3, 2, 3, 2, 1, 2, 1, 2, 1, 0]
+    assert (lv[:, 0] == 0).all() and (lv[:, 1:] == lv[:, 1:2]).all()
+    steps = np.diff(lv[:, 1])
+    assert set(steps.tolist()) == {-1, 1}
+    assert (steps < 0).sum() == 4 + 2 * 3  # U-Net calls: L + (U - 1)(L - 1)
 
 
 def test_diffuser_loss_uniform_timestep_and_clean_start():
@@ -236,6 +247,24 @@ def test_planner_is_deterministic_per_seed(diffuser_checkpoint):
     assert not np.array_equal(a.waypoints, unguided.waypoints)
 
 
+def test_resampling_planner_is_deterministic_per_seed_and_costs_its_extra_calls(diffuser_checkpoint):
+    den, cfg, manifest = denoiser_and_cfg(diffuser_checkpoint, "method.resample=3")
+    planner = make_planner(cfg, den, normaliser_from_manifest(manifest))
+    start = np.array([1.0, 1.0])
+    a, b, c = (planner.plan(start, GOAL, seed=s) for s in (3, 3, 4))
+    assert np.array_equal(a.waypoints, b.waypoints) and not np.array_equal(a.waypoints, c.waypoints)
+    plain = make_planner(load_config(diffuser_checkpoint[0]), den, normaliser_from_manifest(manifest))
+    assert not np.array_equal(a.waypoints, plain.plan(start, GOAL, seed=3).waypoints)
+    # the resampled schedule costs L + (U - 1)(L - 1) U-Net calls, and re-noising needs the job's seed
+    x = np.random.default_rng(0).standard_normal((1, cfg.n_tokens, 2)).astype(np.float32)
+    lv = uniform_levels(cfg.plan_tokens, cfg.diffusion.levels, resample=3)[None]
+    start, goal = x[:, 0].copy(), np.zeros((1, 2), np.float32)
+    res = den.denoise(DenoiseBatch(x, lv, np.array([0.1], np.float32), start, goal, np.array([7])))
+    assert res.stats["model_calls"] == cfg.diffusion.levels + 2 * (cfg.diffusion.levels - 1)
+    with pytest.raises(ValueError, match="noise_seed"):
+        den.denoise(DenoiseBatch(x, lv, np.array([0.1], np.float32), start, goal))
+
+
 # ---- bad input ----
 
 def test_df_checkpoint_with_diffuser_method_names_model_kind(tiny_checkpoint):
@@ -260,6 +289,8 @@ def test_bad_diffuser_configs():
         load_config(["method=diffuser", "model.unet_padding=reflect"])
     with pytest.raises(ConfigError, match="model.unet_edge_frames=-1"):
         load_config(["method=diffuser", "model.unet_edge_frames=-1"])
+    with pytest.raises(ConfigError, match="method.resample"):
+        load_config(["method=diffuser", "method.resample=0"])
 
 
 def test_replicate_padding_reads_the_frames_before_the_start_as_the_start():

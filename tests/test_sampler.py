@@ -13,7 +13,7 @@ from fmctd_dist.denoiser.local import LocalDenoiser
 from fmctd_dist.denoiser.protocol import DenoiseBatch, concat_batches
 from fmctd_dist.device import resolve_device
 from fmctd_dist.diffusion.model import DFTransformer
-from fmctd_dist.diffusion.sampler import make_consts, run_levels, transition
+from fmctd_dist.diffusion.sampler import make_consts, renoise_draws, run_levels, transition
 from fmctd_dist.diffusion.schedule import PyramidSchedule, alphas_cumprod, level_timesteps, linear_betas
 from fmctd_dist.errors import DeviceError
 
@@ -222,6 +222,53 @@ def test_deterministic():
     a = run_levels(model, make_consts(CFG), *args)
     b = run_levels(model, make_consts(CFG), *args)
     assert torch.equal(a[0], b[0]) and torch.equal(a[1], b[1])
+
+
+def test_renoise_row_is_the_forward_marginal_from_the_jobs_own_seed():
+    """A row going up (4 -> 7) re-noises without a model call: x_7 = sqrt(r) x_4 + sqrt(1 - r) z with
+    r = alphabar_7 / alphabar_4 and z drawn from (job seed, row) alone; the context never moves."""
+    c = make_consts(CFG)
+    p = 3
+    x, start, goal = make_jobs(3, p)
+    lv = np.zeros((3, 2, p + 1), np.int64)
+    lv[:, 0, 1:], lv[:, 1, 1:] = 4, 7
+    rec = Recorder()
+    seeds = torch.tensor([5, 6, 5])
+    out, _ = run_levels(rec, c, *tensors(x, lv, np.zeros(3, np.float32), start, goal), noise_seed=seeds)
+    assert rec.calls == []
+    ab = c.sqrt_ab_out.double().numpy() ** 2
+    r = ab[7] / ab[4]
+    z = renoise_draws(seeds, 0, (p + 1, D), torch.device("cpu")).numpy()
+    expect = np.sqrt(r) * x + np.sqrt(1 - r) * z
+    expect[:, 0] = x[:, 0]
+    np.testing.assert_allclose(out.numpy(), expect, rtol=1e-5, atol=1e-6)
+    np.testing.assert_array_equal(z[0], z[2])  # same seed, same draws, whatever the batch position
+    assert not np.array_equal(z[0], z[1])
+    alone, _ = run_levels(rec, c, *tensors(x[1:2], lv[1:2], np.zeros(1, np.float32), start[1:2], goal[1:2]),
+                          noise_seed=seeds[1:2])
+    np.testing.assert_array_equal(alone.numpy()[0], out.numpy()[1])
+
+
+def test_resampled_ladder_is_bitwise_invariant_to_batching():
+    """Down, up, down (RePaint's resampling) through the LocalDenoiser: a job's bits do not depend on
+    the other jobs of its micro-batch, and without seeds a ladder that goes up is one clear error."""
+    p = 4
+    x, start, goal = make_jobs(3, p, seed=2)
+    ladder = [6, 5, 6, 5, 4, 5, 4, 0]
+    lv = np.zeros((3, len(ladder), p + 1), np.int64)
+    lv[:, :, 1:] = np.asarray(ladder)[None, :, None]
+    batch = DenoiseBatch(x, lv, np.array([0.0, 1.0, 0.5], np.float32), start, goal, np.array([11, 12, 13]))
+    den = LocalDenoiser(tiny_model(), CFG, micro_batch=2)
+    full = den.denoise(batch)
+    assert full.stats["model_calls"] == 2 * 5  # two micro-batches x five steps down
+    for j in range(3):
+        np.testing.assert_array_equal(den.denoise(batch.take(np.array([j]))).x[0], full.x[j])
+    reseeded = den.denoise(DenoiseBatch(x, lv, batch.scale, start, goal, np.array([11, 99, 13])))
+    np.testing.assert_array_equal(reseeded.x[[0, 2]], full.x[[0, 2]])
+    assert not np.array_equal(reseeded.x[1], full.x[1])
+    merged = concat_batches([batch.take(np.array([0])), DenoiseBatch(x[1:], lv[1:], batch.scale[1:], start[1:], goal[1:],
+                                                                     np.array([12, 13]))])
+    np.testing.assert_array_equal(merged.noise_seed, [11, 12, 13])
 
 
 # ---------------------------------------------------------------- LocalDenoiser

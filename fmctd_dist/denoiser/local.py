@@ -79,6 +79,7 @@ class LocalDenoiser:
             torch.as_tensor(mb.start, dtype=torch.float32, device=dev),
             torch.as_tensor(mb.goal, dtype=torch.float32, device=dev),
             stats,
+            None if mb.noise_seed is None else torch.as_tensor(mb.noise_seed, dtype=torch.long),
         )
         x, x0 = x.cpu().numpy(), x0.cpu().numpy()  # waits for the device
         return x, x0, time.perf_counter() - t0
@@ -90,7 +91,7 @@ class LocalDenoiser:
         lv = batch.levels
         if lv.size and (lv.min() < 0 or lv.max() > self.consts.levels):
             raise ValueError(f"levels must lie in [0, {self.consts.levels}], got [{lv.min()}, {lv.max()}]")
-        if lv.shape[1] > 1 and (np.diff(lv, axis=1) > 0).any():
-            raise ValueError("levels must not increase from one row to the next (no re-noising)")
+        if lv.shape[1] > 1 and batch.noise_seed is None and (np.diff(lv, axis=1) > 0).any():
+            raise ValueError("levels increase from one row to the next (re-noising) but the batch has no noise_seed")
         if lv.size and (lv[:, :, 0] != 0).any():
             raise ValueError("token 0 is the clean context: its level must be 0 in every row")

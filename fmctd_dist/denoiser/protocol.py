@@ -4,8 +4,9 @@ A job is one partially denoised token sequence plus the per-transition noise lev
 must go through. Expansion (20 pyramid rows) and jumpy simulation (every 10th row + final)
 are the same call, so one protocol serves MCTD, P-MCTD, S-MCTD, Fast-MCTD and the baselines.
 Arrays are numpy (no torch here): the search imports this module and stays framework-free.
-A denoiser is a pure function of its inputs; all randomness (initial noise) is drawn by the
-tree owner from per-job seeds, so results do not depend on batching or on which actor ran.
+A denoiser is a pure function of its inputs; all randomness is drawn from per-job seeds the
+caller chooses (initial noise by the tree owner; re-noising noise, for the rows of a schedule that
+go back up, from ``noise_seed``), so results do not depend on batching or on which actor ran.
 """
 
 from __future__ import annotations
@@ -23,9 +24,11 @@ class DenoiseBatch:
     x:      [B, T, D] float32  token sequences (token 0 = clean context, normalised space)
     levels: [B, R+1, T] int64  noise level of every token before/after each of R transitions;
             row r -> row r+1 is one DDIM transition. Padding rows repeat the last row (no-op).
+            A row where a token's level goes up re-noises it (RePaint's resampling; needs noise_seed).
     scale:  [B] float32        guidance scale per job (0 = unguided)
     start:  [B, d] float32     start position, normalised (guidance target for the context)
     goal:   [B, d] float32     goal position, normalised (guidance target for plan frames)
+    noise_seed: [B] int64 or None  per-job seed of the re-noising draws (None: no row may go up)
     """
 
     x: np.ndarray
@@ -33,6 +36,7 @@ class DenoiseBatch:
     scale: np.ndarray
     start: np.ndarray
     goal: np.ndarray
+    noise_seed: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         b, t, _ = self.x.shape
@@ -41,6 +45,7 @@ class DenoiseBatch:
         )
         assert self.scale.shape == (b,), f"scale {self.scale.shape} != ({b},)"
         assert self.start.shape[0] == b and self.goal.shape[0] == b
+        assert self.noise_seed is None or self.noise_seed.shape == (b,), f"noise_seed {self.noise_seed.shape} != ({b},)"
 
     @property
     def size(self) -> int:
@@ -48,7 +53,8 @@ class DenoiseBatch:
 
     def take(self, idx: np.ndarray | slice) -> "DenoiseBatch":
         """Sub-batch (used to cut micro-batches in job order)."""
-        return DenoiseBatch(self.x[idx], self.levels[idx], self.scale[idx], self.start[idx], self.goal[idx])
+        seed = None if self.noise_seed is None else self.noise_seed[idx]
+        return DenoiseBatch(self.x[idx], self.levels[idx], self.scale[idx], self.start[idx], self.goal[idx], seed)
 
 
 @dataclass
@@ -79,6 +85,8 @@ def concat_batches(batches: list[DenoiseBatch]) -> DenoiseBatch:
         np.concatenate([b.scale for b in batches]),
         np.concatenate([b.start for b in batches]),
         np.concatenate([b.goal for b in batches]),
+        None if all(b.noise_seed is None for b in batches) else np.concatenate(
+            [np.zeros(b.size, np.int64) if b.noise_seed is None else b.noise_seed for b in batches]),
     )
 
 

@@ -2,9 +2,10 @@
 
 A job moves every token from level ``a`` to level ``b`` of the 50-level DDIM ladder in one
 model call; a row of the scheduling matrix gives a per token. Tokens whose level does not
-change are copied through bit for bit, so a tree node's state never drifts. There is no
-randomness here: initial noise is drawn by the tree owner, which keeps a denoiser a pure
-function of its inputs (design §3-4). Guidance follows the authors' ``goal_guidance``
+change are copied through bit for bit, so a tree node's state never drifts. Initial noise is
+drawn by the tree owner; the only draws here are for rows whose levels go back up (RePaint's
+resampling, the Diffuser's ``method.resample``), each from its job's own seed and row index,
+which keeps a denoiser a pure function of its inputs (design §3-4). Guidance follows the authors' ``goal_guidance``
 (reference.md §5): the gradient of a tanh-squashed distance reward on x0_hat, taken
 w.r.t. the noisy input through the network, shifts the predicted noise.
 """
@@ -114,30 +115,59 @@ def transition(model: nn.Module, c: SamplerConsts, x: torch.Tensor, a: torch.Ten
         g = guided[:, None, None]
         eps, x0 = torch.where(g, eps_g, eps), torch.where(g, x0_g, x0)
     x_next = sb * x0 + s1b * eps
-    move = (a != b)[..., None]
+    move = (a > b)[..., None]
     move[:, 0] = False
     return torch.where(move, x_next, x), torch.where(clean, x, x0)
 
 
+def renoise(c: SamplerConsts, x: torch.Tensor, a: torch.Tensor, b: torch.Tensor, z: torch.Tensor) -> torch.Tensor:
+    """Forward diffusion from level a up to level b > a where a < b (others unchanged), with noise z.
+
+    x_b = sqrt(ab_b / ab_a) x_a + sqrt(1 - ab_b / ab_a) z: the DDPM marginal of x_b given x_a.
+    x, z: [B, T, D]; a, b: [B, T].
+    """
+    up = (b > a)[..., None]
+    ratio = (c.sqrt_ab_out[b] / c.sqrt_ab_out[a]).square()[..., None]
+    return torch.where(up, ratio.sqrt() * x + (1.0 - ratio).clamp_min(0.0).sqrt() * z, x)
+
+
+def renoise_draws(seeds: torch.Tensor, row: int, shape: tuple[int, ...], device: torch.device) -> torch.Tensor:
+    """[B, *shape] standard normal noise, job j's drawn from (seeds[j], row) alone, so a job's
+    bits do not depend on its micro-batch or actor."""
+    out = []
+    for s in seeds.tolist():
+        g = torch.Generator().manual_seed(int(np.random.SeedSequence([int(s), row, 0x5E5A]).generate_state(1)[0]))
+        out.append(torch.randn(shape, generator=g))
+    return torch.stack(out).to(device)
+
+
 def run_levels(model: nn.Module, c: SamplerConsts, x: torch.Tensor, levels: torch.Tensor, scale: torch.Tensor,
-               start: torch.Tensor, goal: torch.Tensor, stats: dict | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+               start: torch.Tensor, goal: torch.Tensor, stats: dict | None = None,
+               noise_seed: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
     """Run levels [B, R+1, T] (row r -> r+1 per transition) on x [B, T, D].
 
-    scale [B], start/goal [B, d]. Returns (x, x0): the final tokens and, per job, the x0
-    estimate of that job's last transition that moved a token (x itself if none did), so a
-    job's result does not depend on which other jobs share its micro-batch. Rows where no
-    token of any job moves (padding) skip the model call.
+    scale [B], start/goal [B, d], noise_seed [B] (needed only if some row goes up). Returns
+    (x, x0): the final tokens and, per job, the x0 estimate of that job's last DDIM transition
+    that moved a token (x itself if none did), so a job's result does not depend on which
+    other jobs share its micro-batch. Rows where no token of any job goes down skip the model
+    call; tokens that go up are re-noised (:func:`renoise`).
     """
     assert levels.ndim == 3 and levels.shape[0] == x.shape[0] and levels.shape[2] == x.shape[1]
-    moving = levels[:, 1:] != levels[:, :-1]  # [B, R, T]
-    active_rows = moving.any(dim=(0, 2)).tolist()
+    down = levels[:, 1:] < levels[:, :-1]  # [B, R, T]
+    up = levels[:, 1:] > levels[:, :-1]
+    down_rows, up_rows = down.any(dim=(0, 2)).tolist(), up.any(dim=(0, 2)).tolist()
+    assert noise_seed is not None or not any(up_rows), "rows that re-noise need per-job noise seeds"
+    assert not (up.any(dim=2) & down.any(dim=2)).any(), "a job's row either re-noises or denoises, not both"
     x0 = x
     calls = 0
-    for r, active in enumerate(active_rows):
+    for r, (active, renoising) in enumerate(zip(down_rows, up_rows)):
+        if renoising:
+            z = renoise_draws(noise_seed, r, tuple(x.shape[1:]), x.device)
+            x = renoise(c, x, levels[:, r], levels[:, r + 1], z)
         if not active:
             continue
         x, x0_r = transition(model, c, x, levels[:, r], levels[:, r + 1], scale, start, goal)
-        x0 = torch.where(moving[:, r].any(dim=1)[:, None, None], x0_r, x0)
+        x0 = torch.where(down[:, r].any(dim=1)[:, None, None], x0_r, x0)
         calls += 1
     if stats is not None:
         stats["model_calls"] = stats.get("model_calls", 0) + calls

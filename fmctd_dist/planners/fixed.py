@@ -34,7 +34,8 @@ class FixedSchedulePlanner:
         noise = initial_noise(seed, 1, 0, 0, (cfg.plan_tokens, cfg.token_dim), cfg.diffusion.clip_noise)
         x = np.concatenate([self.codec.context(start), noise[None]], axis=1)  # [1, P+1, D]
         batch = DenoiseBatch(x, self.levels[None].copy(), np.array([cfg.method.guidance_scale], np.float32),
-                             norm.normalise(start), norm.normalise(np.asarray(goal, np.float64)[None]))
+                             norm.normalise(start), norm.normalise(np.asarray(goal, np.float64)[None]),
+                             noise_seed=np.array([seed], np.int64))  # used only by schedules that re-noise
         t_call = time.perf_counter()
         out = self.denoiser.denoise(batch)
         t_call = time.perf_counter() - t_call
