@@ -92,6 +92,25 @@ def test_ray_denoiser_matches_local_bitwise(prepared, pools):
     assert got.retries == 0 and got.denoise_time_s > 0 and got.stats["micro_batches"] == 3
 
 
+def test_ray_denoiser_matches_local_bitwise_when_the_ladder_renoises(prepared, pools):
+    """RePaint-style rows that go back up draw their noise from each job's noise_seed: the shards the
+    pool sends to its actors carry them, so 2 actors give the local bits."""
+    cfg = prepared.cfg
+    local = LocalDenoiser.from_checkpoint(prepared.checkpoint, cfg)
+    rng = np.random.default_rng(1)
+    b, t, d = 7, cfg.n_tokens, cfg.token_dim
+    ladder = np.array([50, 40, 50, 40, 20, 40, 20, 0])
+    levels = np.repeat(ladder[None, :, None], t, axis=2).repeat(b, axis=0)
+    levels[:, :, 0] = 0
+    batch = DenoiseBatch(rng.standard_normal((b, t, d), dtype=np.float32), levels, np.full(b, 0.5, np.float32),
+                         rng.standard_normal((b, 2), dtype=np.float32), rng.standard_normal((b, 2), dtype=np.float32),
+                         noise_seed=np.arange(100, 100 + b))
+    want = local.denoise(batch)
+    got = pools(2).denoiser().denoise(batch)
+    assert np.array_equal(got.x, want.x) and np.array_equal(got.x0, want.x0)
+    assert want.stats["model_calls"] == 2 * 5  # two micro-batches of 5, five rows down each
+
+
 def test_plan_identical_local_one_and_two_actors(prepared, pools):
     ref = local_plan(prepared)
     assert ref[0].status != "stay" and ref[0].expansions >= 24
