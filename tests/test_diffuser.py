@@ -334,8 +334,11 @@ def test_old_manifests_without_unet_padding_load_as_zeros_and_a_mismatch_is_name
     del manifest["config"]["model"]["unet_padding"]  # as written before the field existed
     del manifest["config"]["model"]["unet_edge_frames"]
     (ckpt / "manifest.json").write_text(json.dumps(manifest))
-    load_checkpoint(ckpt, load_config(args))
+    janner = args + ["model.unet_edge_frames=0"]  # what an old manifest means (the Diffuser config now says 16)
+    load_checkpoint(ckpt, load_config(janner))
+    with pytest.raises(CheckpointError, match="unet_edge_frames=0 but the config has model.unet_edge_frames=16"):
+        load_checkpoint(ckpt, load_config(args))
     with pytest.raises(CheckpointError, match="model.unet_padding=None|model.unet_padding='zeros' but the config"):
-        load_checkpoint(ckpt, load_config(args + ["model.unet_padding=replicate"]))
+        load_checkpoint(ckpt, load_config(janner + ["model.unet_padding=replicate"]))
     with pytest.raises(CheckpointError, match="unet_edge_frames"):
         load_checkpoint(ckpt, load_config(args + ["model.unet_edge_frames=4"]))
