@@ -376,7 +376,7 @@ def validate(cfg: Config) -> None:
             raise ConfigError(f"model.unet_padding={cfg.model.unet_padding!r} is not one of {list(UNET_PADDINGS)}; "
                               "zeros is Janner's U-Net, replicate pads with the edge frames")
         if not 0 <= cfg.model.unet_edge_frames < cfg.plan_tokens:
-                raise ConfigError(f"model.unet_edge_frames={cfg.model.unet_edge_frames} must be in [0, {cfg.plan_tokens}) "
+            raise ConfigError(f"model.unet_edge_frames={cfg.model.unet_edge_frames} must be in [0, {cfg.plan_tokens}) "
                               "(fewer than the plan's frames); 0 is Janner's U-Net, 8 reflects 8 frames at each end")
     if not 0.0 < cfg.train.loss_discount <= 1.0:
         raise ConfigError(f"train.loss_discount={cfg.train.loss_discount} must be in (0, 1]: plan frame f is "

@@ -266,6 +266,10 @@ def test_resampled_ladder_is_bitwise_invariant_to_batching():
     reseeded = den.denoise(DenoiseBatch(x, lv, batch.scale, start, goal, np.array([11, 99, 13])))
     np.testing.assert_array_equal(reseeded.x[[0, 2]], full.x[[0, 2]])
     assert not np.array_equal(reseeded.x[1], full.x[1])
+    mixed = lv.copy()
+    mixed[:, 1, 2] = 7  # row 0 -> 1: token 2 goes up while the others go down
+    with pytest.raises(ValueError, match="both re-noises some tokens and denoises others"):
+        den.denoise(DenoiseBatch(x, mixed, batch.scale, start, goal, batch.noise_seed))
     merged = concat_batches([batch.take(np.array([0])), DenoiseBatch(x[1:], lv[1:], batch.scale[1:], start[1:], goal[1:],
                                                                      np.array([12, 13]))])
     np.testing.assert_array_equal(merged.noise_seed, [11, 12, 13])

@@ -25,7 +25,6 @@ class WindowSampler:
         self.normaliser = normaliser
         self.offsets_per_episode = s - train_window  # every offset, stride 1
         self.n_windows = e * self.offsets_per_episode
-        self.start_balance = start_balance
         self._cdf = start_balance_cdf(obs[:, : self.offsets_per_episode], start_balance) if start_balance else None
 
     @property

@@ -91,7 +91,10 @@ class LocalDenoiser:
         lv = batch.levels
         if lv.size and (lv.min() < 0 or lv.max() > self.consts.levels):
             raise ValueError(f"levels must lie in [0, {self.consts.levels}], got [{lv.min()}, {lv.max()}]")
-        if lv.shape[1] > 1 and batch.noise_seed is None and (np.diff(lv, axis=1) > 0).any():
+        step = np.diff(lv, axis=1)  # [B, R, T]
+        if (step > 0).any() and batch.noise_seed is None:
             raise ValueError("levels increase from one row to the next (re-noising) but the batch has no noise_seed")
+        if ((step > 0).any(axis=2) & (step < 0).any(axis=2)).any():
+            raise ValueError("a job's row both re-noises some tokens and denoises others; split it into two rows")
         if lv.size and (lv[:, :, 0] != 0).any():
             raise ValueError("token 0 is the clean context: its level must be 0 in every row")

@@ -121,7 +121,7 @@ def transition(model: nn.Module, c: SamplerConsts, x: torch.Tensor, a: torch.Ten
 
 
 def renoise(c: SamplerConsts, x: torch.Tensor, a: torch.Tensor, b: torch.Tensor, z: torch.Tensor) -> torch.Tensor:
-    """Forward diffusion from level a up to level b > a where a < b (others unchanged), with noise z.
+    """Forward diffusion of the tokens whose level goes up (b > a), with noise z; others unchanged.
 
     x_b = sqrt(ab_b / ab_a) x_a + sqrt(1 - ab_b / ab_a) z: the DDPM marginal of x_b given x_a.
     x, z: [B, T, D]; a, b: [B, T].
