@@ -38,6 +38,12 @@ PLANNERS = ("mctd", "diffusion_forcing", "diffuser")
 PROTOCOLS = ("fixed", "ogbench")
 MODEL_KINDS = ("df", "diffuser")
 BETA_SCHEDULES = ("linear", "cosine")  # same names as diffusion.schedule.BETA_SCHEDULES
+# Recipe levers (issue 17); the first of each is the paper's recipe, the default.
+MODEL_PARAMS = ("x0", "v", "v_offset")  # same names as diffusion.model.MODEL_PARAMS
+MODEL_NORMS = ("post", "pre")
+GUIDANCE_PATHS = ("input", "network")
+LR_SCHEDULES = ("constant", "cosine")
+PRECISIONS = ("fp32", "bf16")
 
 # Top-level shorthands accepted on the command line (`tasks=[1] seeds=[0] runner=local`).
 ALIASES = {"tasks": "eval.tasks", "seeds": "eval.seeds", "runner": "eval.runner"}
@@ -169,6 +175,11 @@ class ModelConfig:
     # 2 x_0 - x_i of the plan about its end frames, cropped after), so the plan's first and last
     # frames are computed like interior ones. 0 = Janner's U-Net (see docs/results.md section 3.1)
     unet_edge_frames: int = spec(0, ge=0, why="0 is Janner's U-Net, 16 reflects 16 frames at each end")
+    # kind=df: what the network's output F means. x0 (paper): x0_hat = F; v: x0_hat = sqrt(ab) x_t -
+    # sqrt(1-ab) F per number; v_offset: each token's frame mean (its offset) as v, its shape (frames
+    # minus their mean) as x0. Trained with the same min-SNR x0 loss (see fmctd_dist.diffusion.model)
+    param: str = spec("x0", choices=MODEL_PARAMS)
+    norm: str = spec("post", choices=MODEL_NORMS)  # kind=df: post-LN blocks (paper) | pre-LN (+ a final LayerNorm)
 
 
 @dataclass
@@ -181,6 +192,10 @@ class DiffusionConfig:
     stabilization: int = spec(10, ge=1, why="clean tokens are fed as timestep stabilization-1 (paper 10)")
     snr_clip: float = spec(5.0, gt=0, why="min-SNR loss weight clip (paper 5)")
     clip_noise: float = spec(20.0, gt=0, why="initial noise clipped to +-clip_noise (paper 20)")
+    # Goal guidance's gradient w.r.t. the noisy input: input (the authors'): through the whole x0
+    # estimate; network: through the network branch only, model.param's skip path held constant
+    # (the same as input for model.param=x0, which has none)
+    guidance_path: str = spec("input", choices=GUIDANCE_PATHS)
 
 
 @dataclass
@@ -209,6 +224,12 @@ class TrainConfig:
     # the paper's). Leaves p(plan | start) unchanged; see fmctd_dist.data.windows.start_balance_cdf.
     start_balance: float = spec(0.0, ge=0, le=1, why="windows are drawn with weight count(start cell)**-start_balance "
                                                      "(0 = uniform, the paper's; 1 = every start cell alike)")
+    # constant (paper): warm-up then train.lr; cosine: warm-up then cosine decay to 0 at the run's end
+    # (train.max_steps, or train.time_budget_s of recorded wall time if that comes first)
+    lr_schedule: str = spec("constant", choices=LR_SCHEDULES)
+    precision: str = spec("fp32", choices=PRECISIONS)  # fp32 (paper) | bf16: autocast for the training step
+    time_budget_s: float = spec(0.0, ge=0, why="stop (with a checkpoint) once the run's recorded wall time reaches "
+                                                "this many seconds, so recipe arms get equal wall-clock; 0 = none")
 
 
 @dataclass
@@ -247,6 +268,9 @@ class EvalConfig:
     out: str = "results"  # results root; rows go to <out>/<run>/<method>/<env>/...
     run: str = "default"
     episode_time_limit: float = spec(0.0, ge=0, why="seconds of planning per episode; 0 = none")
+    # Rerunning into a run whose rows came from another config or checkpoint is refused; true keeps those
+    # rows and adds this config's missing keys (tables then show each config on its own line).
+    resume_mixed: bool = False
     # torch threads of an in-process denoiser (runner=local, bench_speed); 0 = torch default.
     # Set 1 when other jobs share the cores: 2 spinning threads on a busy 2-core machine run 10x slower.
     threads: int = spec(0, ge=0, why=THREADS)
@@ -465,6 +489,12 @@ def validate(cfg: Config) -> None:
         if not 0 <= cfg.model.unet_edge_frames < cfg.plan_tokens:
             raise ConfigError(f"model.unet_edge_frames={cfg.model.unet_edge_frames} must be in [0, {cfg.plan_tokens}) "
                               "(fewer than the plan's frames); 0 is Janner's U-Net, 8 reflects 8 frames at each end")
+    if cfg.model.kind == "diffuser" and (cfg.model.param, cfg.model.norm) != ("x0", "post"):
+        raise ConfigError(f"model.param={cfg.model.param} / model.norm={cfg.model.norm} apply to model.kind=df only; "
+                          "the Diffuser U-Net predicts x0 (set model.param=x0 model.norm=post)")
+    if cfg.model.kind == "diffuser" and cfg.diffusion.guidance_path != "input":
+        raise ConfigError("diffusion.guidance_path=network applies to model.kind=df only (the U-Net has no skip "
+                          "path); set diffusion.guidance_path=input")
     if cfg.model.width % cfg.model.heads:
         raise ConfigError(f"model.width={cfg.model.width} is not divisible by model.heads={cfg.model.heads}; "
                           "pick a width that is a multiple of heads (paper 128 / 4)")

@@ -26,6 +26,10 @@ class DatasetError(FmctdError):
     """A dataset file is missing, corrupt, or does not match its manifest."""
 
 
+class ResultsError(FmctdError):
+    """A results directory holds rows of another config or checkpoint, or files that are not our rows."""
+
+
 class DeviceError(FmctdError):
     """A requested device is not there, or every denoiser actor is gone."""
 

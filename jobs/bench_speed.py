@@ -29,7 +29,7 @@ from fmctd_dist.device import set_threads
 from fmctd_dist.diffusion.checkpoint import load_checkpoint, normaliser_from_manifest
 from fmctd_dist.envs import make_env
 from fmctd_dist.evaluation.episode import describe, run_episode
-from fmctd_dist.evaluation.grid import prepare, provenance
+from fmctd_dist.evaluation.grid import missing, prepare, provenance
 from fmctd_dist.evaluation.results import ResultStore
 from fmctd_dist.planners import make_planner
 
@@ -57,6 +57,9 @@ def main(argv: list[str]) -> int:
     setups = {m: build(m, rest) for m in methods}  # every config and checkpoint checked up front
     cfg0 = next(iter(setups.values()))[0]
     results = ResultStore(cfg0.eval.out, store) if store else None
+    if results is not None:  # refuse a store holding rows of another config or checkpoint, before any episode
+        for cfg, _, prepared in setups.values():
+            missing(prepared, results)
     set_threads(cfg0.eval.threads)
     env = make_env(cfg0.env.name, cfg0.env.protocol)
     rows: dict[str, list[dict]] = {m: [] for m in methods}

@@ -7,8 +7,6 @@ only skip keys that already have a row and write one Parquet file per finished e
 
 from __future__ import annotations
 
-import hashlib
-import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
@@ -17,10 +15,11 @@ from tqdm.auto import tqdm
 
 from fmctd_dist.config import Config, git_sha
 from fmctd_dist.device import resolve_device, set_threads
-from fmctd_dist.diffusion.checkpoint import read_manifest, sha256_file
-from fmctd_dist.errors import CheckpointError
+from fmctd_dist.diffusion.checkpoint import read_manifest, verify_checkpoint
+from fmctd_dist.errors import CheckpointError, ResultsError
 from fmctd_dist.evaluation.controllers import check_controller, controller_factory
 from fmctd_dist.evaluation.episode import describe, run_episode
+from fmctd_dist.evaluation.identity import config_hash, differences, identity_columns
 from fmctd_dist.evaluation.results import ResultStore
 
 
@@ -36,22 +35,11 @@ class Prepared:
     git_sha: str
 
 
-def config_hash(cfg: Config) -> str:
-    """Hash of what determines a plan: everything but where/how the grid is run."""
-    d = cfg.to_dict()
-    for key in ("eval", "ray"):
-        d.pop(key)
-    return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:16]
-
-
 def prepare(cfg: Config) -> Prepared:
     check_controller(cfg)  # AntMaze: the low-level policy exists and was trained for this maze
     device = str(resolve_device(cfg.device))
     ckpt = cfg.checkpoint_dir()
-    manifest = read_manifest(ckpt, cfg)  # exists, parses, agrees with env/jump/model/n_tokens
-    if sha256_file(ckpt / "model.pt") != manifest.get("model_sha256"):
-        raise CheckpointError(f"checkpoint {ckpt}: model.pt does not match its manifest (corrupt); "
-                              f"retrain with `python jobs/train.py env={cfg.env.name} jump={cfg.jump}`")
+    manifest = verify_checkpoint(ckpt, cfg)  # exists, well-typed, agrees with env/jump/model/n_tokens, sha256
     return Prepared(cfg, ckpt, manifest["digest"], device, config_hash(cfg), git_sha())
 
 
@@ -59,16 +47,36 @@ def grid(cfg: Config) -> list[tuple[int, int]]:
     return [(t, s) for t in cfg.eval.tasks for s in cfg.eval.seeds]
 
 
-def missing(cfg: Config, store: ResultStore) -> list[tuple[int, int]]:
-    """The (task, seed) keys of the grid that have no row yet: what a (re)run still has to do."""
-    return [(t, s) for t, s in grid(cfg) if not store.has(cfg.method.name, cfg.env.name, t, s)]
+def missing(p: Prepared, store: ResultStore, log: Callable[[str], None] = print) -> list[tuple[int, int]]:
+    """The (task, seed) keys of the grid without a row: what a (re)run still has to do.
+
+    Refuses (ResultsError, before anything starts) when the run already holds rows of this
+    method and env from another config or checkpoint, listing what differs, unless
+    ``eval.resume_mixed`` opts in (those rows are then kept, and tables show them apart).
+    Unreadable row files count as missing and are reported.
+    """
+    cfg = p.cfg
+    rows = store.rows(cfg.method.name, cfg.env.name)
+    for line in store.report():
+        log(line)
+    foreign = [r for r in rows if (r.get("config_hash"), r.get("checkpoint_digest")) != (p.config_hash,
+                                                                                          p.checkpoint_digest)]
+    if foreign and not cfg.eval.resume_mixed:
+        diffs = list(dict.fromkeys(d for r in foreign for d in differences(r, cfg, p.checkpoint_digest)))
+        raise ResultsError(
+            f"{store.root / cfg.method.name / cfg.env.name} holds {len(foreign)} row(s) from another config or "
+            f"checkpoint: {'; '.join(diffs[:12])}{' ...' if len(diffs) > 12 else ''}. Write to a new run with "
+            f"eval.run=<new name>, or keep those rows and add this config's with eval.resume_mixed=true "
+            "(tables list each config on its own line)")
+    done = {(int(r["task"]), int(r["seed"])) for r in rows}
+    return [(t, s) for t, s in grid(cfg) if (t, s) not in done]
 
 
 def provenance(p: Prepared, n_actors: int) -> dict[str, Any]:
     """Run-level fields of a row: where it ran, and the search knobs the ablation tables group by."""
     m = p.cfg.method
     return {"n_denoiser_actors": n_actors, "device": p.device, "git_sha": p.git_sha,
-            "checkpoint_digest": p.checkpoint_digest, "config_hash": p.config_hash,
+            "checkpoint_digest": p.checkpoint_digest, **identity_columns(p.cfg),
             "parallel": m.parallel, "virtual_weight": m.virtual_weight, "redundancy_aware": m.redundancy_aware,
             "leaf_parallel": m.leaf_parallel, "jump": p.cfg.jump, "budget": m.budget,
             "episode_time_limit": p.cfg.eval.episode_time_limit}
@@ -83,7 +91,7 @@ def run_local(p: Prepared, store: ResultStore, progress: bool = True,
     from fmctd_dist.planners import make_planner
 
     cfg = p.cfg
-    todo = missing(cfg, store)
+    todo = missing(p, store, log)
     if not todo:
         return []
     set_threads(cfg.eval.threads)

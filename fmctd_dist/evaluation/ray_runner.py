@@ -166,7 +166,7 @@ def run_ray(p: Prepared, store: ResultStore, progress: bool = True,
             log: Callable[[str], None] = print) -> list[dict[str, Any]]:
     """All missing episodes of the grid on Ray; rows written here as they finish."""
     cfg = p.cfg
-    todo = missing(cfg, store)
+    todo = missing(p, store, log)
     if not todo:
         return []
     check_ray_config(p)

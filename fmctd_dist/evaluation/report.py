@@ -20,7 +20,8 @@ import pyarrow.parquet as pq
 
 from fmctd_dist.config import ANT_ENVS, ENV_NAMES, POINT_ENVS
 from fmctd_dist.evaluation.paper import paper_cell
-from fmctd_dist.evaluation.results import summarise
+from fmctd_dist.evaluation.identity import row_identity
+from fmctd_dist.evaluation.results import label, summarise
 
 METHOD_ORDER = ["diffuser", "diffuser-replan", "diffusion-forcing", "mctd", "p-mctd", "s-mctd", "fast-mctd"]
 ENV_ORDER = list(POINT_ENVS)  # the paper's order: medium, large, giant
@@ -95,24 +96,25 @@ def _shares(s: dict[str, Any]) -> str:
 def maze_table(rows: list[dict[str, Any]], envs: list[str] = ENV_ORDER) -> str:
     """The paper's Table "Maze results" for ``envs``: one line per (method, env) in the paper's order."""
     summary = summarise(rows)
-    key = {(s["method"], s["env"]): s for s in summary}
+    key: dict[tuple[str, str], list[dict[str, Any]]] = {}
+    for s in summary:
+        key.setdefault((s["method"], s["env"]), []).append(s)
     # "in denoiser": share of planning time spent computing inside denoiser actors / inside denoiser calls
     # (the latter adds queueing behind other env actors and Ray transport; "–" for rows recorded before it existed)
     lines = ["| method | env | episodes (tasks x seeds) | success (%) | planning time (s) | in denoiser: compute / calls | "
              "success per task | paper: success / time (GPU) |", "|---|---|---|---|---|---|---|---|"]
     for env in envs:
         for m in METHOD_ORDER:
-            s = key.get((m, env))
-            if s is None:
+            if (m, env) not in key:
                 lines.append(f"| {m} | {env} | not run | | | | | {paper_cell(m, env)} |")
-                continue
-            n_tasks = len(s["per_task"])
-            timed_out = f" ({s['timed_out']} timed out)" if s["timed_out"] else ""
-            lines.append(
-                f"| {m} | {env} | {s['episodes']} ({n_tasks} x {s['seeds']}) | "
-                f"{_pm(s['success'], s['success_std'])}{timed_out} | {_pm(s['plan_time_s'], s['plan_time_std'], '.2f')} | "
-                f"{_shares(s)} | {'/'.join(f'{v:.0f}' for v in s['per_task'].values())} | "
-                f"{paper_cell(m, env)} |")
+            for s in key.get((m, env), []):  # one line per config/checkpoint: never averaged together
+                n_tasks = len(s["per_task"])
+                timed_out = f" ({s['timed_out']} timed out)" if s["timed_out"] else ""
+                lines.append(
+                    f"| {label(s)} | {env} | {s['episodes']} ({n_tasks} x {s['seeds']}) | "
+                    f"{_pm(s['success'], s['success_std'])}{timed_out} | {_pm(s['plan_time_s'], s['plan_time_std'], '.2f')} | "
+                    f"{_shares(s)} | {'/'.join(f'{v:.0f}' for v in s['per_task'].values())} | "
+                    f"{paper_cell(m, env)} |")
     return "\n".join(lines)
 
 
@@ -128,10 +130,11 @@ def ablation_summary(rows: list[dict[str, Any]], knob: str) -> list[dict[str, An
         env_rows = [r for r in rows if r["env"] == env and knob in r]
         for v in sorted({r[knob] for r in env_rows}):
             rs = [r for r in env_rows if r[knob] == v]
-            s = summarise([{**r, "method": "x"} for r in rs])[0]
-            out.append({**s, "value": v, "method": sorted({r["method"] for r in rs}),
-                        "expansions": float(np.mean([r["expansions"] for r in rs])),
-                        "iterations": float(np.mean([r["iterations"] for r in rs]))})
+            for s in summarise([{**r, "method": "x"} for r in rs]):  # one entry per config/checkpoint
+                mine = [r for r in rs if row_identity(r) == s["identity"]]
+                out.append({**s, "value": v, "method": sorted({r["method"] for r in mine}),
+                            "expansions": float(np.mean([r["expansions"] for r in mine])),
+                            "iterations": float(np.mean([r["iterations"] for r in mine]))})
     return out
 
 
@@ -146,7 +149,8 @@ def ablation_table(ab: Ablation, rows: list[dict[str, Any]]) -> str:
         ratio = f"{s['plan_time_s'] / ref['plan_time_s']:.2f}x" if ref else "–"
         timed_out = f" ({s['timed_out']} timed out)" if s["timed_out"] else ""
         lines.append(
-            f"| {s['value']} | {','.join(s['method'])} / {s['env'].replace('pointmaze-', '')} | "
+            f"| {s['value']} | {','.join(s['method'])} / {s['env'].replace('pointmaze-', '')}"
+            f"{f' [{v}]' if (v := s.get('variant')) else ''} | "
             f"{s['episodes']} ({len(s['per_task'])} x {s['seeds']}) | {_pm(s['success'], s['success_std'])}{timed_out} | "
             f"{_pm(s['plan_time_s'], s['plan_time_std'], '.2f')} | {ratio} | {s['expansions']:.0f} | "
             f"{s['iterations']:.1f} | {_shares(s)} | {ab.paper.get(s['value'], '–')} |")
