@@ -40,9 +40,11 @@ class FakeData:
 
 
 def tiny_cfg(max_steps: int, *extra: str) -> Config:
-    return load_config(["model.width=32", "model.layers=2", "model.heads=2", "model.ff=64",
-                        f"train.max_steps={max_steps}", "train.batch_size=8", "train.warmup=5",
-                        "train.ckpt_every=10", "train.val_every=10", "train.val_batches=2", *extra])
+    """The tiny config; ``extra`` words replace the defaults of the keys they name."""
+    words = ["model.width=32", "model.layers=2", "model.heads=2", "model.ff=64",
+             f"train.max_steps={max_steps}", "train.batch_size=8", "train.warmup=5",
+             "train.ckpt_every=10", "train.val_every=10", "train.val_batches=2", *extra]
+    return load_config(list({w.split("=", 1)[0]: w for w in words}.values()))
 
 
 def test_train_resume_continues_from_saved_step(tmp_path):
@@ -130,8 +132,9 @@ def test_init_from_starts_a_new_env_and_horizon_from_another_checkpoints_weights
     src, dst = tmp_path / "point", tmp_path / "ant"
     train(tiny_cfg(10), FakeData(), src, progress=False)
     _, src_manifest = load_checkpoint(src, tiny_cfg(10))
-    # another maze, horizon (21 tokens instead of 11) and dataset; lr 0 keeps the weights as loaded
-    cfg = tiny_cfg(10, "env=pointmaze-giant", f"train.init_from={src}", "train.lr=0")
+    # another maze, horizon (21 tokens instead of 11) and dataset; lr 1e-30 (> 0, the field's range) keeps the
+    # float32 weights as loaded
+    cfg = tiny_cfg(10, "env=pointmaze-giant", f"train.init_from={src}", "train.lr=1e-30")
     train(cfg, FakeData(n_tokens=21, digest="other-data"), dst, progress=False)
     model, manifest = load_checkpoint(dst, cfg)
     source, _ = load_checkpoint(src, tiny_cfg(10))

@@ -34,6 +34,7 @@ class LocalDenoiser:
         self.model = model.to(self.device).eval()
         self.model.requires_grad_(False)  # guidance needs d/dx only, never parameter grads
         self.consts = make_consts(diffusion_cfg, self.device)
+        self.guidance_path = diffusion_cfg.guidance_path  # through the whole x0 estimate, or its network branch
         self.micro_batch = micro_batch
         self.digest = digest  # checkpoint digest ("" for an in-memory model)
 
@@ -80,6 +81,7 @@ class LocalDenoiser:
             torch.as_tensor(mb.goal, dtype=torch.float32, device=dev),
             stats,
             None if mb.noise_seed is None else torch.as_tensor(mb.noise_seed, dtype=torch.long),
+            self.guidance_path,
         )
         x, x0 = x.cpu().numpy(), x0.cpu().numpy()  # waits for the device
         return x, x0, time.perf_counter() - t0

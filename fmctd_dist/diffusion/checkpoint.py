@@ -23,14 +23,14 @@ from torch import nn
 from fmctd_dist.config import REPO_ROOT, Config, ModelConfig
 from fmctd_dist.data.tokens import Normaliser
 from fmctd_dist.diffusion.model import DFTransformer
-from fmctd_dist.diffusion.models import build_model, model_config_from_dict
+from fmctd_dist.diffusion.models import build_model, diffusion_config_from_dict, model_config_from_dict
 from fmctd_dist.errors import CheckpointError
 
 MODEL_FILE = "model.pt"
 MANIFEST_FILE = "manifest.json"
 TRAIN_STATE_FILE = "train_state.pt"
 FORMAT_VERSION = 1
-MODEL_FIELDS = ("kind", "frame_stack", "width", "layers", "heads", "ff")
+MODEL_FIELDS = ("kind", "frame_stack", "width", "layers", "heads", "ff", "param", "norm")
 UNET_FIELDS = ("unet_channels", "unet_kernel", "unet_padding", "unet_edge_frames")  # checked when kind=diffuser
 SHAPE_FREE_FIELDS = ("unet_padding", "unet_edge_frames")  # fields a state_dict does not depend on: train.init_from may change them
 
@@ -208,8 +208,9 @@ def load_init_weights(ckpt_dir: str | Path, cfg: Config) -> tuple[dict[str, torc
 
 def model_from_manifest(manifest: dict[str, Any]) -> DFTransformer:
     """An untrained model of the architecture a manifest describes (any model.kind)."""
-    return build_model(model_config_from_dict(manifest["config"]["model"]), manifest["n_tokens"],
-                       manifest["token_dim"])
+    saved = manifest["config"]
+    return build_model(model_config_from_dict(saved["model"]), manifest["n_tokens"], manifest["token_dim"],
+                       diffusion_config_from_dict(saved.get("diffusion", {})))
 
 
 def normaliser_from_manifest(manifest: dict[str, Any]) -> Normaliser:

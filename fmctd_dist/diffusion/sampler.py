@@ -7,7 +7,10 @@ drawn by the tree owner; the only draws here are for rows whose levels go back u
 resampling, the Diffuser's ``method.resample``), each from its job's own seed and row index,
 which keeps a denoiser a pure function of its inputs (design §3-4). Guidance follows the authors' ``goal_guidance``
 (reference.md §5): the gradient of a tanh-squashed distance reward on x0_hat, taken
-w.r.t. the noisy input through the network, shifts the predicted noise.
+w.r.t. the noisy input through the network, shifts the predicted noise. With
+``guidance_path="network"`` (diffusion.guidance_path) the gradient skips the skip path of a
+v / v_offset model (see diffusion.model), which hands the reward's per-frame gradient to each
+noisy frame unsmoothed.
 """
 
 from __future__ import annotations
@@ -84,7 +87,8 @@ def goal_reward(x0: torch.Tensor, start: torch.Tensor, goal: torch.Tensor) -> to
 
 
 def transition(model: nn.Module, c: SamplerConsts, x: torch.Tensor, a: torch.Tensor, b: torch.Tensor,
-               scale: torch.Tensor, start: torch.Tensor, goal: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+               scale: torch.Tensor, start: torch.Tensor, goal: torch.Tensor,
+               guidance_path: str = "input") -> tuple[torch.Tensor, torch.Tensor]:
     """One DDIM step from levels a to b. x: [B, T, D]; a, b: [B, T] long; scale: [B].
 
     Returns (x_next, x0_hat), both [B, T, D]; for guided jobs x0_hat is the guided x0'. Tokens
@@ -100,7 +104,7 @@ def transition(model: nn.Module, c: SamplerConsts, x: torch.Tensor, a: torch.Ten
     if bool(guided.any()):
         with torch.enable_grad():
             xg = x_in.detach().requires_grad_(True)
-            x0 = model(xg, t_in)
+            x0 = model(xg, t_in) if guidance_path == "input" else model(xg, t_in, skip_grad=False)
             objective = GUIDANCE_GAIN * scale * goal_reward(x0, start, goal)  # [B]
             (grad,) = torch.autograd.grad(objective.sum(), xg)
         x0 = x0.detach()
@@ -143,7 +147,7 @@ def renoise_draws(seeds: torch.Tensor, row: int, shape: tuple[int, ...], device:
 
 def run_levels(model: nn.Module, c: SamplerConsts, x: torch.Tensor, levels: torch.Tensor, scale: torch.Tensor,
                start: torch.Tensor, goal: torch.Tensor, stats: dict | None = None,
-               noise_seed: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+               noise_seed: torch.Tensor | None = None, guidance_path: str = "input") -> tuple[torch.Tensor, torch.Tensor]:
     """Run levels [B, R+1, T] (row r -> r+1 per transition) on x [B, T, D].
 
     scale [B], start/goal [B, d], noise_seed [B] (needed only if some row goes up). Returns
@@ -166,7 +170,7 @@ def run_levels(model: nn.Module, c: SamplerConsts, x: torch.Tensor, levels: torc
             x = renoise(c, x, levels[:, r], levels[:, r + 1], z)
         if not active:
             continue
-        x, x0_r = transition(model, c, x, levels[:, r], levels[:, r + 1], scale, start, goal)
+        x, x0_r = transition(model, c, x, levels[:, r], levels[:, r + 1], scale, start, goal, guidance_path)
         x0 = torch.where(down[:, r].any(dim=1)[:, None, None], x0_r, x0)
         calls += 1
     if stats is not None:

@@ -4,12 +4,16 @@ Every token gets its own timestep, so one network learns all the partially-noise
 sequences the pyramid schedule (and hence the tree search) will show it. The loop saves
 model + manifest + train_state every ``ckpt_every`` steps; rerunning the same command
 continues from the last save with optimiser and RNG states restored, so a killed run and
-an uninterrupted one produce the same weights (bitwise on CPU).
+an uninterrupted one produce the same weights (bitwise on CPU). ``train.time_budget_s`` stops
+a run once its recorded wall time reaches the budget (recipe arms at equal wall-clock); the
+recipe levers ``train.lr_schedule`` and ``train.precision`` (bf16 autocast of the training
+step) default to the paper's constant LR and fp32.
 """
 
 from __future__ import annotations
 
 import copy
+import math
 import time
 from pathlib import Path
 from typing import Any, Protocol
@@ -37,6 +41,7 @@ LOG_EVERY = 10  # steps between progress-bar updates (each one syncs the device)
 # The paper's training (appendix tables "Hyperparameters for the Diffusion Forcing" / "... for the Diffuser").
 PAPER_TRAINING = {"df": {"layers": 12, "batch_size": 1024, "steps": 200_005},
                   "diffuser": {"batch_size": 32, "steps": 20_000, "unet_channels": [32, 128, 256]}}
+PAPER_RECIPE = {"model.param": "x0", "model.norm": "post", "train.lr_schedule": "constant", "train.precision": "fp32"}
 
 
 class TrainDataLike(Protocol):
@@ -138,13 +143,36 @@ def vs_paper(cfg: Config, step: int) -> str:
         parts.append(f"{cfg.model.layers} of the paper's {paper['layers']} layers (width {cfg.model.width})")
     if cfg.train.init_from:
         parts.append(f"started from the weights of {cfg.train.init_from} (its steps not counted here)")
+    levers = {"model.param": cfg.model.param, "model.norm": cfg.model.norm, "train.lr_schedule": cfg.train.lr_schedule,
+              "train.precision": cfg.train.precision}
+    changed = [f"{k}={v}" for k, v in levers.items() if v != PAPER_RECIPE[k]]
+    if changed:
+        parts.append("recipe " + ", ".join(changed) + " (paper " + ", ".join(
+            f"{k.split('.')[-1]} {PAPER_RECIPE[k]}" for k in levers if levers[k] != PAPER_RECIPE[k]) + ")")
     return "; ".join(parts)
 
 
-def lr_at(cfg: Config, step: int) -> float:
-    """Linear warm-up over train.warmup steps, then constant."""
-    w = cfg.train.warmup
-    return cfg.train.lr * (min(1.0, (step + 1) / w) if w > 0 else 1.0)
+def lr_at(cfg: Config, step: int, wall_s: float = 0.0) -> float:
+    """Linear warm-up over train.warmup steps, times the schedule's factor.
+
+    constant (paper): 1. cosine: (1 + cos(pi p)) / 2 with p the fraction of the run done,
+    max(step / train.max_steps, wall_s / train.time_budget_s): a time-budgeted run decays to
+    0 when its budget ends (then the LR depends on wall time, so such a run is not bitwise
+    reproducible; step-bounded runs are).
+    """
+    tc = cfg.train
+    lr = tc.lr * (min(1.0, (step + 1) / tc.warmup) if tc.warmup > 0 else 1.0)
+    if tc.lr_schedule == "constant":
+        return lr
+    done = step / tc.max_steps
+    if tc.time_budget_s > 0:
+        done = max(done, wall_s / tc.time_budget_s)
+    return lr * 0.5 * (1.0 + math.cos(math.pi * min(done, 1.0)))
+
+
+def out_of_time(cfg: Config, wall_s: float) -> bool:
+    """The run's recorded wall time has reached train.time_budget_s (never, when it is 0)."""
+    return 0 < cfg.train.time_budget_s <= wall_s
 
 
 @torch.no_grad()
@@ -167,7 +195,7 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
 
     with torch.random.fork_rng(devices=[]):  # seeded init without touching the caller's global RNG
         torch.manual_seed(tc.seed)
-        model = build_model(cfg.model, cfg.n_tokens).to(device)
+        model = build_model(cfg.model, cfg.n_tokens, diffusion_cfg=cfg.diffusion).to(device)
     opt = torch.optim.AdamW(model.parameters(), lr=tc.lr, betas=(0.9, 0.999), weight_decay=tc.weight_decay)
     loss_fn = make_loss(cfg, device)
     rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence([tc.seed, data.seed])))
@@ -187,7 +215,7 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
         step, wall, history = int(state["step"]), float(state["wall_time_s"]), state["history"]
         init_from = state.get("init_from")
         resumed_from = step
-        if step >= tc.max_steps:
+        if step >= tc.max_steps or out_of_time(cfg, wall):
             return _summary(step, wall, history, out_dir, model, resumed_from)
     elif (out_dir / "manifest.json").exists():
         # A shipped checkpoint (model.pt + manifest, no train_state.pt: that is not committed).
@@ -205,7 +233,7 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
         history = {"val": [list(v) for v in manifest.get("val_history", [])], "train": [],
                    "optimizer_reset_at": [step]}
         resumed_from = step
-        if step >= tc.max_steps:
+        if step >= tc.max_steps or out_of_time(cfg, wall):
             return _summary(step, wall, history, out_dir, model, resumed_from)
     elif tc.init_from:
         weights, init_from = load_init_weights(resolve_path(tc.init_from), cfg)
@@ -243,9 +271,11 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
                 f"({cfg.n_tokens}, {cfg.token_dim}); data.train_window, env.horizon, jump and model.frame_stack "
                 "must describe the same windows"
             )
+        elapsed = wall + time.perf_counter() - t_seg
         for group in opt.param_groups:
-            group["lr"] = lr_at(cfg, step)
-        loss = loss_fn(model, x0, gen)
+            group["lr"] = lr_at(cfg, step, elapsed)
+        with torch.autocast(device.type, dtype=torch.bfloat16, enabled=tc.precision == "bf16"):
+            loss = loss_fn(model, x0, gen)
         opt.zero_grad(set_to_none=True)
         loss.backward()
         opt.step()
@@ -253,7 +283,8 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
         step += 1
         running += loss.detach()
         n_running += 1
-        if step % LOG_EVERY == 0 or step == tc.max_steps:
+        last = step == tc.max_steps or out_of_time(cfg, wall + time.perf_counter() - t_seg)
+        if step % LOG_EVERY == 0 or last:
             mean = float(running) / n_running
             if not np.isfinite(mean):
                 raise FloatingPointError(f"training loss is {mean} at step {step}; lower train.lr or check the data")
@@ -262,13 +293,15 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
             bar.set_postfix(loss=f"{mean:.4f}", steps_s=f"{n_running / (now - t_log):.1f}")
             bar.update(n_running)
             running, n_running, t_log = torch.zeros((), device=device), 0, now
-        if tc.val_every > 0 and (step % tc.val_every == 0 or step == tc.max_steps):
+        if tc.val_every > 0 and (step % tc.val_every == 0 or last):
             history["val"].append([step, validation_loss(ema, loss_fn, val, device)])
-        if step % tc.ckpt_every == 0 or step == tc.max_steps:
+        if step % tc.ckpt_every == 0 or last:
             now = time.perf_counter()
             wall += now - t_seg
             t_seg = now
             save()
+        if last:
+            break
     bar.close()
     return _summary(step, wall, history, out_dir, model, resumed_from)
 

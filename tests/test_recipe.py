@@ -1,0 +1,194 @@
+"""Recipe levers (issue 17): each selectable and recorded, old manifests load as the paper's recipe,
+guidance gradients exact under every lever, and train.time_budget_s stops and resumes."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import torch
+from test_train_loop import FakeData, tiny_cfg
+
+from fmctd_dist.config import Config, DiffusionConfig, ModelConfig, config_from_dict
+from fmctd_dist.denoiser.local import LocalDenoiser
+from fmctd_dist.denoiser.protocol import DenoiseBatch
+from fmctd_dist.diffusion.checkpoint import MANIFEST_FILE, load_checkpoint, write_manifest
+from fmctd_dist.diffusion.model import DFTransformer
+from fmctd_dist.diffusion.sampler import GUIDANCE_GAIN, goal_reward, make_consts, transition
+from fmctd_dist.diffusion.schedule import PyramidSchedule
+from fmctd_dist.diffusion.train import lr_at, train
+from fmctd_dist.errors import CheckpointError, ConfigError
+
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
+
+# lever word -> the manifest's config path; the first three change the model, the rest training
+LEVERS = {"model.param=v": ("model", "param"), "model.param=v_offset": ("model", "param"),
+          "model.norm=pre": ("model", "norm"), "train.lr_schedule=cosine": ("train", "lr_schedule"),
+          "train.precision=bf16": ("train", "precision"),
+          "diffusion.guidance_path=network": ("diffusion", "guidance_path")}
+MODEL_LEVERS = ("model.param=v", "model.param=v_offset", "model.norm=pre")
+RECIPE_FIELDS = {"model": ("param", "norm"), "train": ("lr_schedule", "precision", "time_budget_s"),
+                 "diffusion": ("guidance_path",)}
+PAPER = {"model": {"param": "x0", "norm": "post"}, "train": {"lr_schedule": "constant", "precision": "fp32",
+                                                              "time_budget_s": 0.0},
+         "diffusion": {"guidance_path": "input"}}
+
+
+def test_defaults_are_the_papers_recipe_and_bad_values_are_named():
+    cfg = Config()
+    for group, fields in PAPER.items():
+        for name, value in fields.items():
+            assert getattr(getattr(cfg, group), name) == value, f"{group}.{name}"
+    with pytest.raises(ConfigError, match="model.param"):
+        tiny_cfg(5, "model.param=eps")
+    with pytest.raises(ConfigError, match="train.time_budget_s"):
+        tiny_cfg(5, "train.time_budget_s=-1")
+    with pytest.raises(ConfigError, match="model.kind=df only"):
+        tiny_cfg(5, "method=diffuser", "model.kind=diffuser", "model.param=v")
+
+
+@pytest.mark.parametrize("lever", list(LEVERS))
+def test_lever_is_selectable_and_recorded_in_the_manifest(tmp_path, lever):
+    cfg = tiny_cfg(6, lever, "train.ckpt_every=6", "train.val_every=6")
+    out = train(cfg, FakeData(), tmp_path, progress=False)
+    assert out["step"] == 6 and np.isfinite(out["final_losses"]["train"])
+    manifest = json.loads((tmp_path / MANIFEST_FILE).read_text())
+    group, name = LEVERS[lever]
+    assert manifest["config"][group][name] == lever.split("=")[1]
+    model, _ = load_checkpoint(tmp_path, cfg)
+    if lever in MODEL_LEVERS:
+        assert getattr(model, name) == lever.split("=")[1]
+        # the same checkpoint under the paper's recipe: one CheckpointError naming the field
+        with pytest.raises(CheckpointError, match=f"trained with model.{name}="):
+            load_checkpoint(tmp_path, tiny_cfg(6))
+    if lever != "diffusion.guidance_path=network":
+        assert lever in manifest["vs_paper"]
+
+
+def test_old_manifest_without_the_recipe_fields_loads_as_the_papers_recipe(tmp_path):
+    cfg = tiny_cfg(4, "train.ckpt_every=4", "train.val_every=4")
+    train(cfg, FakeData(), tmp_path, progress=False)
+    manifest = json.loads((tmp_path / MANIFEST_FILE).read_text())
+    for group, fields in RECIPE_FIELDS.items():
+        for name in fields:
+            del manifest["config"][group][name]
+    write_manifest(manifest, tmp_path / MANIFEST_FILE)  # model.pt untouched: its sha still matches
+    model, loaded = load_checkpoint(tmp_path, cfg)
+    assert (model.param, model.norm) == ("x0", "post")
+    old = config_from_dict(loaded["config"])
+    for group, fields in PAPER.items():
+        for name, value in fields.items():
+            assert getattr(getattr(old, group), name) == value
+    with pytest.raises(CheckpointError, match="trained with model.param='x0' but the config has model.param='v'"):
+        load_checkpoint(tmp_path, tiny_cfg(4, "model.param=v"))
+
+
+# ------------------------------------------------------------------ guidance gradients
+
+CASES = [("x0", "post", "input"), ("x0", "post", "network"), ("v", "post", "input"), ("v", "post", "network"),
+         ("v_offset", "post", "input"), ("v_offset", "post", "network"), ("x0", "pre", "input"),
+         ("v", "pre", "network")]
+FD_STEP = 1e-6
+FD_RTOL = 1e-5  # float64 central differences: truncation ~1e-12, round-off ~1e-10
+
+
+def guidance_grad_from_transition(model, consts, x, a, b, scale, start, goal, path):
+    """The gradient the sampler added, read back from its guided and unguided x0 estimates.
+
+    transition: eps_g = eps - s1b grad and x0_g = (x_in - s1a eps_g) / sa, so
+    grad = (x0_g - x0) sa / (s1a s1b) on every token that moves (a > b).
+    """
+    _, x0_g = transition(model, consts, x, a, b, scale, start, goal, path)
+    _, x0_u = transition(model, consts, x, a, b, torch.zeros_like(scale), start, goal, path)
+    sa, s1a, s1b = (getattr(consts, f)[lv].double()[..., None] for f, lv in
+                    (("sqrt_ab_in", a), ("sqrt_1m_ab_in", a), ("sqrt_1m_ab_out", b)))
+    return (x0_g - x0_u) * sa / (s1a * s1b)
+
+
+def finite_difference_grad(model, consts, x, a, scale, start, goal, path, tokens):
+    """Central differences of 62.5 scale R(x0_hat(x_in)) w.r.t. the plan tokens of x_in.
+
+    path=network holds the skip path at the unperturbed input (DFTransformer.skip).
+    """
+    x_in = x.clone()
+    x_in[:, 0] = consts.sqrt_ab_in[0].double() * x[:, 0]  # the stabilised context, as transition feeds it
+    t_in = consts.t_in[a]
+    frozen = model.skip(x_in, t_in)
+
+    def objective(z):
+        x0 = model(z, t_in)
+        if path == "network":
+            x0 = x0 - model.skip(z, t_in) + frozen
+        return GUIDANCE_GAIN * scale * goal_reward(x0, start, goal)  # [B]
+
+    grad = torch.zeros_like(x)
+    with torch.no_grad():
+        for tok in tokens:
+            for d in range(x.shape[2]):
+                hi, lo = x_in.clone(), x_in.clone()
+                hi[:, tok, d] += FD_STEP
+                lo[:, tok, d] -= FD_STEP
+                grad[:, tok, d] = (objective(hi) - objective(lo)) / (2 * FD_STEP)
+    return grad
+
+
+@pytest.mark.parametrize("param, norm, path", CASES)
+def test_guidance_gradient_matches_finite_differences(param, norm, path):
+    torch.manual_seed(0)
+    model = DFTransformer.from_config(ModelConfig(width=32, layers=2, heads=2, ff=64, param=param, norm=norm),
+                                      n_tokens=4).double().eval().requires_grad_(False)
+    consts = make_consts(DiffusionConfig())
+    rng = np.random.default_rng(0)
+    x = torch.as_tensor(rng.standard_normal((2, 4, 20)))
+    start, goal = torch.as_tensor(rng.standard_normal((2, 2))), torch.as_tensor(rng.standard_normal((2, 2)))
+    a = torch.tensor([[0, 3, 12, 40], [0, 2, 25, 50]])  # low, middle and high noise (b > 0: s1b > 0)
+    b = (a - 1).clamp(min=0)
+    scale = torch.tensor([1.0, 0.5], dtype=torch.float64)
+    got = guidance_grad_from_transition(model, consts, x, a, b, scale, start, goal, path)[:, 1:]
+    want = finite_difference_grad(model, consts, x, a, scale, start, goal, path, range(1, 4))[:, 1:]
+    assert float(want.abs().max()) > 1e-3  # the check has something to compare
+    torch.testing.assert_close(got, want, rtol=FD_RTOL, atol=FD_RTOL * float(want.abs().max()))
+    if param != "x0":
+        other = "input" if path == "network" else "network"
+        alt = guidance_grad_from_transition(model, consts, x, a, b, scale, start, goal, other)[:, 1:]
+        assert not torch.allclose(alt, got)  # the two paths differ where there is a skip path
+
+
+def test_a_v_checkpoint_plans_through_the_local_denoiser(tmp_path):
+    cfg = tiny_cfg(6, "model.param=v_offset", "diffusion.guidance_path=network", "train.ckpt_every=6",
+                   "train.val_every=6")
+    train(cfg, FakeData(), tmp_path, progress=False)
+    den = LocalDenoiser.from_checkpoint(tmp_path, cfg, micro_batch=2)
+    assert den.model.param == "v_offset" and den.guidance_path == "network"
+    full = PyramidSchedule(cfg.plan_tokens, cfg.diffusion.levels).full()
+    rng = np.random.default_rng(0)
+    x = rng.standard_normal((3, cfg.n_tokens, cfg.token_dim)).astype(np.float32)
+    out = den.denoise(DenoiseBatch(x, np.broadcast_to(full, (3, *full.shape)).copy(),
+                                   np.array([0.0, 1.0, 2.0], np.float32), np.zeros((3, 2), np.float32),
+                                   np.ones((3, 2), np.float32)))
+    assert np.isfinite(out.x).all() and not np.array_equal(out.x[1], out.x[2])
+
+
+# ------------------------------------------------------------------ schedule and time budget
+
+
+def test_cosine_lr_decays_to_zero_at_the_runs_end_by_steps_or_wall_time():
+    cfg = tiny_cfg(100, "train.lr_schedule=cosine", "train.warmup=10")
+    assert lr_at(cfg, 4) == pytest.approx(cfg.train.lr * 0.5 * (1 + np.cos(np.pi * 0.04)) / 2)
+    assert lr_at(cfg, 50) == pytest.approx(cfg.train.lr / 2) and lr_at(cfg, 100) == pytest.approx(0, abs=1e-12)
+    timed = tiny_cfg(100, "train.lr_schedule=cosine", "train.warmup=10", "train.time_budget_s=60")
+    assert lr_at(timed, 20, wall_s=30.0) == pytest.approx(cfg.train.lr / 2)  # half the budget gone
+    assert lr_at(tiny_cfg(100), 50) == cfg.train.lr  # the paper's: constant after warm-up
+
+
+def test_time_budget_stops_with_a_checkpoint_and_resumes(tmp_path):
+    words = ("train.ckpt_every=100000", "train.val_every=100000")
+    out = train(tiny_cfg(10**6, "train.time_budget_s=1.0", *words), FakeData(), tmp_path, progress=False)
+    assert 0 < out["step"] < 10**6 and out["wall_time_s"] >= 1.0
+    manifest = json.loads((tmp_path / MANIFEST_FILE).read_text())
+    assert manifest["train_steps"] == out["step"] and manifest["val_history"][-1][0] == out["step"]
+    again = train(tiny_cfg(10**6, "train.time_budget_s=1.0", *words), FakeData(), tmp_path, progress=False)
+    assert again["step"] == out["step"] and again["resumed_from"] == out["step"]  # budget spent: nothing to do
+    more = train(tiny_cfg(10**6, "train.time_budget_s=2.0", *words), FakeData(), tmp_path, progress=False)
+    assert more["resumed_from"] == out["step"] and more["step"] > out["step"] and more["wall_time_s"] >= 2.0
