@@ -279,8 +279,9 @@ class EvalConfig:
 @dataclass
 class RayConfig:
     address: str = ""  # "" -> join a running cluster if there is one, else start local
-    denoiser_actors: int = spec(1, gt=0, why="DenoiserActors in the pool")
-    env_actors: int = spec(2, gt=0, why="EnvActors, one episode each at a time")
+    # 0 = auto: one DenoiserActor per GPU (ray.num_gpus each) or per ray.num_cpus CPUs of the cluster
+    denoiser_actors: int = spec(0, ge=0, why="DenoiserActors in the pool; 0 = one per GPU or CPU the cluster has")
+    env_actors: int = spec(0, ge=0, why="EnvActors, one episode each at a time; 0 = as many as denoiser actors")
     micro_batch: int = spec(8, gt=0, why="M: jobs per denoiser call (fixed shapes -> determinism); raise on GPUs")
     num_gpus: float = spec(0.0, ge=0, why="GPUs per denoiser actor (needs device=cuda)")
     num_cpus: float = spec(1.0, ge=0, why="CPUs per denoiser actor")

@@ -42,7 +42,7 @@ def test_round_trip_dict():
         (["env.protocol=noisy"], "env.protocol"),
         (["data.episode_steps=300"], "data.episode_steps"),  # window longer than episodes
         (["method.guidance_scales=[]"], "method.guidance_scales"),
-        (["ray.denoiser_actors=0"], "ray.denoiser_actors"),
+        (["ray.denoiser_actors=-1"], "ray.denoiser_actors"),
         (["method.planner=beam"], "method.planner"),
         (["horizon"], "key=value"),
         (["data.train_window=450", "env.horizon=500"], "data.train_window"),

@@ -49,7 +49,7 @@ def test_evaluate_entry_point_resumes_without_duplicates(tiny_checkpoint, ray_cl
     rows = evaluate(base + ["seeds=[0]"], progress=False)
     assert [(r["task"], r["seed"]) for r in rows] == [(2, 0)]
     row = rows[0]
-    assert row["n_denoiser_actors"] == 1 and row["retries"] == 0 and row["device"] == "cpu"
+    assert row["n_denoiser_actors"] == 2 and row["retries"] == 0  # auto: one per CPU of the 2-CPU cluster and row["device"] == "cpu"
     assert row["expansions"] > 0 and 0 < row["denoise_time_s"] <= row["plan_time_s"]
     first = tmp_path / "r/p-mctd/pointmaze-medium/task=2/seed=0.parquet"
     mtime = first.stat().st_mtime_ns
@@ -99,8 +99,8 @@ BAD = [  # (extra overrides, text the message must contain)
     ("missing", "checkpoint"),
     (["env=pointmaze-large"], "env"),
     (["device=cuda"], "device"),
-    (["ray.denoiser_actors=0"], "ray.denoiser_actors"),
-    (["ray.env_actors=0"], "ray.env_actors"),
+    (["ray.denoiser_actors=-1"], "ray.denoiser_actors"),
+    (["ray.env_actors=-1"], "ray.env_actors"),
     (["ray.micro_batch=0"], "ray.micro_batch"),
     (["tasks=[9]"], "eval.tasks"),
     (["seeds=[-1]"], "eval.seeds"),
@@ -196,7 +196,7 @@ def test_ray_job_submit(tiny_checkpoint, ray_cluster, tmp_path):
         files = list(tmp_path.glob("submit/" + ROWS))
         assert len(files) == 1
         row = pq.read_table(files[0]).to_pylist()[0]
-        assert (row["task"], row["seed"], row["n_denoiser_actors"]) == (1, 0, 1)
+        assert (row["task"], row["seed"]) == (1, 0) and row["n_denoiser_actors"] >= 1
     finally:
         os.killpg(head.pid, signal.SIGTERM)
         try:

@@ -80,3 +80,27 @@ def test_antmaze_rows_get_their_own_table_with_the_papers_antmaze_numbers():
     assert "98 ± 6 / 2.2 ± 0.1 s" in table  # the paper's AntMaze Fast-MCTD, not its PointMaze 100 ± 0 / 3.6 s
     assert "| mctd | antmaze-giant | not run | | | | | 94 ± 9 / 214.5 ± 11.0 s |" in table
     assert "pointmaze" not in table
+
+
+@pytest.mark.parametrize("times", [[4.56], [4.48, 4.64], [2.4, 12.8, 264.0], [0.9, 1.1, 3.0, 30.0, 300.0]])
+def test_summary_plot_tick_labels_never_collide(times):
+    """One method over 4.48-4.64 s used to get a log axis whose labels overlapped (issue 18)."""
+    import matplotlib.pyplot as plt
+
+    from fmctd_dist.evaluation.plots import success_vs_time_figure
+
+    methods = ["fast-mctd", "s-mctd", "p-mctd", "mctd", "diffuser"]
+    summary = [{"method": methods[i], "env": "pointmaze-medium", "plan_time_s": t, "plan_time_std": 0.02 * t,
+                "success": 90.0, "success_std": 5.0, "variant": ""} for i, t in enumerate(times)]
+    fig = success_vs_time_figure(summary)
+    ax = fig.axes[0]
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    labels = [t for t in ax.get_xticklabels() + ax.get_xminorticklabels() if t.get_text() and t.get_visible()]
+    lo, hi = ax.get_xlim()
+    labels = [t for t in labels if lo <= t.get_position()[0] <= hi]
+    boxes = sorted((t.get_window_extent(renderer) for t in labels), key=lambda b: b.x0)
+    assert len(boxes) >= 2, [t.get_text() for t in labels]  # the axis says where the points sit
+    assert all(a.x1 <= b.x0 for a, b in zip(boxes, boxes[1:])), [t.get_text() for t in labels]
+    assert ax.get_xscale() == ("log" if max(times) / min(times) >= 4 else "linear")
+    plt.close(fig)

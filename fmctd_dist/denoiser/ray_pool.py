@@ -22,9 +22,11 @@ from typing import Any
 
 import numpy as np
 import ray
-from ray.exceptions import GetTimeoutError, RayActorError, RayTaskError
+from ray.exceptions import (
+    GetTimeoutError, NodeDiedError, ObjectLostError, OwnerDiedError, RayActorError, RayTaskError, WorkerCrashedError,
+)
 
-from fmctd_dist.config import Config, config_from_dict
+from fmctd_dist.config import Config, RayConfig, config_from_dict
 from fmctd_dist.denoiser.protocol import DenoiseBatch, DenoiseResult, micro_batch_indices
 from fmctd_dist.errors import DeviceError, FmctdError
 
@@ -40,6 +42,16 @@ def unwrap_ray_error(e: BaseException) -> BaseException:
         if isinstance(cause, BaseException):
             return unwrap_ray_error(cause)
     return e
+
+
+def auto_actors(r: RayConfig) -> int:
+    """Denoiser actors for ``ray.denoiser_actors=0``: one per GPU (``ray.num_gpus`` each), else one per
+    ``ray.num_cpus`` CPUs of the connected cluster, so no core the cluster offers sits idle."""
+    res = ray.cluster_resources()
+    if r.num_gpus > 0:
+        return max(int(res.get("GPU", 0.0) // r.num_gpus), 1)
+    cpus = res.get("CPU", 1.0)
+    return max(int(cpus // r.num_cpus) if r.num_cpus > 0 else int(cpus), 1)
 
 
 @ray.remote
@@ -151,7 +163,8 @@ class RayDenoiser:
                 s = pending.pop(ref)
                 try:
                     res: DenoiseResult = ray.get(ref)
-                except (RayActorError, GetTimeoutError) as e:
+                except (RayActorError, GetTimeoutError, ObjectLostError, OwnerDiedError, NodeDiedError,
+                        WorkerCrashedError) as e:  # the actor, its process or its node (with the result) is gone
                     self._failed(s, e)
                     retries += 1
                     pending[self._submit(s)] = s
@@ -228,12 +241,14 @@ class DenoiserPool:
 
     @classmethod
     def create(cls, prepared, n: int | None = None, timeout_s: float = 300.0) -> "DenoiserPool":
-        """Start ``n`` (default ``ray.denoiser_actors``) actors and wait until each has loaded the model.
+        """Start ``n`` (default ``ray.denoiser_actors``, 0 = :func:`auto_actors`) actors and wait until each
+        has loaded the model.
 
         Raises the actors' own CheckpointError/DeviceError (not a RayTaskError).
         """
         cfg = prepared.cfg
         n = cfg.ray.denoiser_actors if n is None else n
+        n = auto_actors(cfg.ray) if n == 0 else n
         if n < 1:
             raise DeviceError(f"ray.denoiser_actors={n} must be >= 1")
         opts = {"num_cpus": cfg.ray.num_cpus, "num_gpus": cfg.ray.num_gpus,

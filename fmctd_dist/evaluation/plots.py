@@ -9,10 +9,12 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
-from matplotlib.ticker import FormatStrFormatter, LogLocator, NullFormatter  # noqa: E402
+from matplotlib.ticker import FormatStrFormatter, LogLocator, MaxNLocator, NullFormatter  # noqa: E402
 import numpy as np  # noqa: E402
 
+from fmctd_dist.config import ENV_NAMES  # noqa: E402
 from fmctd_dist.envs.maze import MAZE_UNIT, MazeGeometry  # noqa: E402
+from fmctd_dist.evaluation.results import label  # noqa: E402
 
 
 def _save(fig, path: Path) -> Path:
@@ -55,26 +57,50 @@ def plot_episode(row: dict[str, Any], geo: MazeGeometry, path: Path) -> Path:
 
 
 def plot_success_vs_time(summary: list[dict[str, Any]], path: Path) -> Path:
-    """The paper's Figure 1 style: one point per (method, env), error bars over seeds."""
+    """Write :func:`success_vs_time_figure` to ``path``."""
+    return _save(success_vs_time_figure(summary), path)
+
+
+def success_vs_time_figure(summary: list[dict[str, Any]]):
+    """The paper's Figure 1 style: one point per (method, env, config), error bars over seeds.
+
+    Planning times spanning less than 4x get a linear axis (a log axis over 4.5-4.6 s has
+    only colliding minor labels); wider spans a log axis labelled at 1-2-5 steps. Each method
+    (and config variant) has its own colour in the legend.
+    """
     fig, ax = plt.subplots(figsize=(8, 4))
-    envs = sorted({s["env"] for s in summary})
-    markers = dict(zip(envs, "osD^v"))
-    methods = sorted({s["method"] for s in summary})
+    envs = sorted({s["env"] for s in summary}, key=lambda e: (ENV_NAMES.index(e) if e in ENV_NAMES else 99, e))
+    markers = dict(zip(envs, "osD^vP<>"))
+    methods = list(dict.fromkeys(label(s) for s in summary))
     colors = {m: plt.get_cmap("tab10")(i % 10) for i, m in enumerate(methods)}  # one colour per method
     for s in summary:
         ax.errorbar(s["plan_time_s"], s["success"], xerr=s["plan_time_std"], yerr=s["success_std"],
-                    marker=markers[s["env"]], color=colors[s["method"]], capsize=3, ls="none")
+                    marker=markers[s["env"]], color=colors[label(s)], capsize=3, ls="none")
     for m in methods:
         ax.plot([], [], "s", color=colors[m], label=m)
     for env in envs:
         ax.plot([], [], markers[env], color="k", mfc="none", label=env.replace("pointmaze-", ""))
-    ax.set_xscale("log")
-    ax.set_xlabel("planning time per episode (s, log)")
+    times = [s["plan_time_s"] for s in summary if s["plan_time_s"] > 0]
+    lo = min((s["plan_time_s"] - s["plan_time_std"] for s in summary), default=0.0)
+    hi = max((s["plan_time_s"] + s["plan_time_std"] for s in summary), default=1.0)
+    if times and max(times) / min(times) >= 4:
+        ax.set_xscale("log")
+        ax.xaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
+        ax.xaxis.set_major_formatter(FormatStrFormatter("%g"))
+        ax.xaxis.set_minor_formatter(NullFormatter())
+        ax.set_xlabel("planning time per episode (s, log)")
+    else:
+        pad = max(0.15 * (hi - lo), 0.05 * max(hi, 1e-3))
+        ax.set_xlim(max(lo - pad, 0.0), hi + pad)
+        ax.xaxis.set_major_locator(MaxNLocator(nbins=6))
+        ax.set_xlabel("planning time per episode (s)")
     ax.set_ylabel("success (%)")
     ax.set_ylim(-5, 105)
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=7, ncol=2, loc="center left", bbox_to_anchor=(1.01, 0.5))
-    return _save(fig, path)
+    ax.legend(fontsize=7, ncol=1 if len(methods) + len(envs) <= 8 else 2, loc="center left",
+              bbox_to_anchor=(1.01, 0.5))
+    fig.tight_layout()
+    return fig
 
 
 def plot_ablation(summary: list[dict[str, Any]], knob: str, path: Path) -> Path:

@@ -27,11 +27,14 @@ from typing import Any, Callable
 
 import numpy as np
 import ray
-from ray.exceptions import RayActorError, RayTaskError
+from ray.exceptions import (
+    LocalRayletDiedError, NodeDiedError, ObjectLostError, OwnerDiedError, RayActorError, RayTaskError,
+    WorkerCrashedError,
+)
 from tqdm.auto import tqdm
 
 from fmctd_dist.config import Config, load_config
-from fmctd_dist.denoiser.ray_pool import DenoiserPool, RayDenoiser, unwrap_ray_error
+from fmctd_dist.denoiser.ray_pool import DenoiserPool, RayDenoiser, auto_actors, unwrap_ray_error
 from fmctd_dist.errors import ConfigError, DeviceError
 from fmctd_dist.evaluation.episode import describe
 from fmctd_dist.evaluation.grid import Prepared, grid, missing, prepare, provenance
@@ -73,6 +76,10 @@ class PlannerDriver:
         r = getattr(self.planner, "last_result", None)
         return None if r is None else r.tree
 
+    def info(self) -> dict[str, Any]:
+        """Where this driver runs: pid and Ray node id (what a fault test kills)."""
+        return where()
+
 
 class _DriverPlanner:
     """Planner protocol for run_episode: every plan() is one call to the episode's PlannerDriver."""
@@ -106,6 +113,50 @@ class EnvActor:
 
         return run_episode(self.cfg, self.env, self.planner, task, seed, make_controller=self.make_controller)
 
+    def info(self) -> dict[str, Any]:
+        """Where this env actor runs: pid and Ray node id (what a fault test kills)."""
+        return where()
+
+
+def where() -> dict[str, Any]:
+    return {"pid": os.getpid(), "node_id": ray.get_runtime_context().get_node_id()}
+
+
+# What a dead actor, worker process or node looks like to its caller (not an error of the episode).
+LOST = (RayActorError, NodeDiedError, OwnerDiedError, ObjectLostError, WorkerCrashedError, LocalRayletDiedError)
+
+
+def actor_lost(e: BaseException) -> bool:
+    """True when ``e`` (or what it wraps: an env actor sees its driver die) says an actor or node is gone."""
+    if isinstance(e, RayTaskError):
+        cause = getattr(e, "cause", None)
+        return isinstance(cause, BaseException) and actor_lost(cause)
+    return isinstance(e, LOST)
+
+
+def first_line(e: BaseException) -> str:
+    text = str(e).strip().splitlines()
+    return f"{type(e).__name__}: {text[0][:200] if text else ''}"
+
+
+def episode_pair(p: Prepared, denoisers: list) -> tuple:
+    """A new (EnvActor, PlannerDriver) for one episode at a time, spread over the cluster's nodes.
+
+    No restarts of their own: when one dies its episode is re-run on a new pair (run_ray), which
+    also covers a driver whose env actor died mid-plan.
+    """
+    opts = {"scheduling_strategy": "SPREAD", "max_restarts": 0}
+    driver = PlannerDriver.options(**opts).remote(p, denoisers)
+    return EnvActor.options(**opts).remote(p, driver), driver
+
+
+def kill_quietly(actors) -> None:
+    for a in actors:
+        try:
+            ray.kill(a, no_restart=True)
+        except Exception:  # noqa: BLE001 - already gone
+            pass
+
 
 def check_ray_config(p: Prepared) -> None:
     """Checks that need no cluster (run before ray.init)."""
@@ -117,17 +168,29 @@ def check_ray_config(p: Prepared) -> None:
         raise ConfigError(f"ray.num_cpus={r.num_cpus} must be >= 0")
 
 
-def check_cluster(p: Prepared) -> None:
+def pool_size(p: Prepared) -> tuple[int, int]:
+    """(denoiser actors, env actors) for the cluster we are connected to.
+
+    ``ray.denoiser_actors=0`` (the default) gives one actor per GPU (``ray.num_gpus`` each) or per
+    ``ray.num_cpus`` CPUs the cluster has, so no core sits idle; ``ray.env_actors=0`` runs as many
+    episodes at once as there are denoiser actors (more would queue on them). Explicit values win.
+    """
+    r = p.cfg.ray
+    n = r.denoiser_actors or auto_actors(r)
+    return n, r.env_actors or n
+
+
+def check_cluster(p: Prepared, n_actors: int) -> None:
     """After ray.init, before any actor: the cluster must hold what the pool asks for."""
     r = p.cfg.ray
     res = ray.cluster_resources()
-    need_gpu = r.denoiser_actors * r.num_gpus
+    need_gpu = n_actors * r.num_gpus
     if need_gpu > res.get("GPU", 0.0):
-        raise DeviceError(f"{r.denoiser_actors} denoiser actor(s) x ray.num_gpus={r.num_gpus} need {need_gpu:g} GPU(s) "
+        raise DeviceError(f"{n_actors} denoiser actor(s) x ray.num_gpus={r.num_gpus} need {need_gpu:g} GPU(s) "
                           f"but the Ray cluster has {res.get('GPU', 0.0):g}; lower ray.denoiser_actors or add GPU nodes")
-    need_cpu = r.denoiser_actors * r.num_cpus
+    need_cpu = n_actors * r.num_cpus
     if need_cpu > res.get("CPU", 0.0):
-        raise DeviceError(f"{r.denoiser_actors} denoiser actor(s) x ray.num_cpus={r.num_cpus} need {need_cpu:g} CPU(s) "
+        raise DeviceError(f"{n_actors} denoiser actor(s) x ray.num_cpus={r.num_cpus} need {need_cpu:g} CPU(s) "
                           f"but the Ray cluster has {res.get('CPU', 0.0):g}; lower ray.denoiser_actors or ray.num_cpus")
 
 
@@ -174,35 +237,53 @@ def run_ray(p: Prepared, store: ResultStore, progress: bool = True,
     actors: list = []
     pool = None
     try:
-        check_cluster(p)
-        pool = DenoiserPool.create(p, cfg.ray.denoiser_actors)
+        n_denoisers, n_env_actors = pool_size(p)
+        check_cluster(p, n_denoisers)
+        pool = DenoiserPool.create(p, n_denoisers)
         log(f"{len(pool.actors)} denoiser actor(s): " + "; ".join(
             f"pid {i['pid']} device {i['device']} gpu_ids {i['gpu_ids']} cuda devices {i['cuda_device_count']}"
             for i in pool.infos))
-        n_envs = min(cfg.ray.env_actors, len(todo))
-        drivers = [PlannerDriver.remote(p, pool.actors) for _ in range(n_envs)]
-        envs = [EnvActor.remote(p, d) for d in drivers]
-        actors = drivers + envs
+        n_envs = min(n_env_actors, len(todo))
+        pairs = [episode_pair(p, pool.actors) for _ in range(n_envs)]
+        actors = [a for pair in pairs for a in pair]
         rows: list[dict[str, Any]] = []
-        queue, free, pending = list(todo), list(envs), {}
+        queue, free, pending = list(todo), list(pairs), {}
+        reruns: dict[tuple[int, int], int] = {}  # episodes re-run because an actor (or its node) died
         bar = tqdm(total=len(todo), desc=f"{cfg.method.name} {cfg.env.name} (ray)", unit="ep", disable=not progress)
         while queue or pending:
             while queue and free:
-                env, key = free.pop(), queue.pop(0)
-                pending[env.run.remote(*key)] = (env, key)
+                pair, key = free.pop(), queue.pop(0)
+                pending[pair[0].run.remote(*key)] = (pair, key)
             ready, _ = ray.wait(list(pending), num_returns=1)
-            env, key = pending.pop(ready[0])
+            pair, key = pending.pop(ready[0])
             try:
                 row = ray.get(ready[0])
-            except RayTaskError as e:
-                raise unwrap_ray_error(e) from None
-            except RayActorError as e:
-                raise DeviceError(f"the env actor running task {key[0]} seed {key[1]} died: "
-                                  f"{str(e).splitlines()[0]}; rerun to resume (finished episodes are kept)") from None
+            except (RayTaskError, RayActorError) as e:
+                if not actor_lost(e):
+                    raise unwrap_ray_error(e) from None
+                # The episode's env actor or planner driver died (killed, OOM, node gone): its half-run
+                # episode left no row, so run it again from the start on a new pair. A plan is a pure
+                # function of (config, checkpoint, seed): the rerun's row is the one a fault-free run writes.
+                n = reruns[key] = reruns.get(key, 0) + 1
+                if n > cfg.ray.max_restarts:
+                    raise DeviceError(
+                        f"task {key[0]} seed {key[1]}: its env actor or planner driver died {n} time(s) "
+                        f"(last: {first_line(e)}); ray.max_restarts={cfg.ray.max_restarts} re-runs are allowed per "
+                        "episode; check the nodes (`ray status`, `ray logs`) and rerun to resume (finished "
+                        "episodes are kept)") from None
+                (bar.write if progress else log)(f"task {key[0]} seed {key[1]}: an actor of its episode died "
+                                                 f"({first_line(e)}); re-running it ({n}/{cfg.ray.max_restarts})")
+                kill_quietly(pair)
+                pair = episode_pair(p, pool.actors)
+                actors += pair
+                queue.insert(0, key)
+                free.append(pair)
+                continue
             row = {**row, **provenance(p, len(pool.actors))}
+            row["retries"] = int(row.get("retries", 0)) + reruns.get(key, 0)
             store.write(row)
             rows.append(row)
-            free.append(env)
+            free.append(pair)
             bar.update(1)
             bar.set_postfix(success=f"{sum(r['success'] for r in rows)}/{len(rows)}")
             (bar.write if progress else log)(describe(row))
