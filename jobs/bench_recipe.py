@@ -47,7 +47,9 @@ INTRO = ("Arms trained from the same seed for the same wall-clock budget (`train
          "then measured side by side: `python jobs/bench_recipe.py` (the exact command above each table). "
          "samples/s = steps x batch / recorded training wall time; x0 error and steps at timestep 19 "
          "(the last DDIM level) on 64 validation windows; plan quality from 100 unguided and 100 guided "
-         "full-pyramid plans (section 4's measurement); Fast-MCTD on the listed grid, runner=local, one thread.")
+         "full-pyramid plans (section 4's measurement); Fast-MCTD on the listed grid, runner=local, one thread; "
+         "core share = CPU seconds / wall seconds of the training process (below 1: other jobs took part of its "
+         "core, so it did less work in the same wall-clock).")
 
 
 class Arm:
@@ -101,16 +103,25 @@ def evaluated(out: Path, ckpt: Path) -> bool:
             and json.loads(done.read_text()).get("digest") == json.loads(manifest.read_text())["digest"])
 
 
-def run_logged(cmd: list[str], log: Path) -> None:
-    """Run cmd with its output in ``log`` (one thread: OMP_NUM_THREADS=1); raise with the log's tail on failure."""
+def run_logged(cmd: list[str], log: Path) -> tuple[float, float]:
+    """Run cmd with its output in ``log`` (one thread: OMP_NUM_THREADS=1) -> (wall s, CPU s of that process).
+
+    The CPU seconds say how much of a core the arm really had: arms share the machine with
+    other jobs, so equal wall-clock is equal compute only when this ratio is alike.
+    Raises with the log's tail on failure.
+    """
     env = {**os.environ, "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "PYTHONUNBUFFERED": "1"}
+    t0 = time.time()
     with open(log, "a") as f:
         f.write(f"$ {shlex.join(cmd)}\n")
         f.flush()
-        rc = subprocess.run(cmd, cwd=REPO, stdout=f, stderr=subprocess.STDOUT, env=env).returncode
-    if rc:
+        proc = subprocess.Popen(cmd, cwd=REPO, stdout=f, stderr=subprocess.STDOUT, env=env)
+        _, status, usage = os.wait4(proc.pid, 0)
+        proc.returncode = os.waitstatus_to_exitcode(status)
+    if proc.returncode:
         tail = log.read_text().replace("\r", "\n").strip().splitlines()[-15:]
-        raise RuntimeError(f"{cmd[1]} exited {rc}; the end of {log}:\n" + "\n".join(tail))
+        raise RuntimeError(f"{cmd[1]} exited {proc.returncode}; the end of {log}:\n" + "\n".join(tail))
+    return time.time() - t0, usage.ru_utime + usage.ru_stime
 
 
 def do_arm(args: argparse.Namespace, arm: Arm, arms: dict[str, Arm]) -> dict[str, Any]:
@@ -122,15 +133,18 @@ def do_arm(args: argparse.Namespace, arm: Arm, arms: dict[str, Arm]) -> dict[str
     if arm.base is None and not finished(ckpt, args.budget_s):
         train_words = merged([RUN_FOREVER], words, [f"train.out={ckpt}", f"train.time_budget_s={args.budget_s}",
                                                      "train.threads=1"])
-        t0 = time.time()
-        run_logged([sys.executable, "jobs/train.py", *train_words], out / "train.log")
-        tqdm.write(f"[{arm.name}] trained in {time.time() - t0:.0f}s (log {out / 'train.log'})")
+        wall, cpu = run_logged([sys.executable, "jobs/train.py", *train_words], out / "train.log")
+        (out / "train_process.json").write_text(json.dumps({"wall_s": wall, "cpu_s": cpu}) + "\n")
+        tqdm.write(f"[{arm.name}] trained in {wall:.0f}s, {cpu:.0f} CPU s (log {out / 'train.log'})")
     t0 = time.time()
     if not evaluated(out, ckpt):
         run_logged([sys.executable, __file__, "--evaluate", str(out), "--checkpoint", str(ckpt), "--tag", args.tag,
                     "--name", arm.name, "--tasks", args.tasks, "--seeds", args.seeds, "--results-out", args.results_out,
                     "--episode-limit-s", str(args.episode_limit_s), *words], out / "eval.log")
     row = json.loads((out / "bench.json").read_text())
+    proc = ckpt / "train_process.json"  # absent when the training ran before this bench (then "?")
+    usage = json.loads(proc.read_text()) if proc.exists() else None
+    row["core_share"] = usage["cpu_s"] / usage["wall_s"] if usage else None
     tqdm.write(f"[{arm.name}] evaluated in {time.time() - t0:.0f}s: Fast-MCTD {row['fast_mctd_success']}/"
                f"{row['fast_mctd_episodes']}, guided no-warp {100 * row['guided_no_warp']:.0f}%")
     return row
@@ -190,7 +204,7 @@ def table(rows: list[dict[str, Any]], arms: dict[str, Arm]) -> str:
     d = rows[0]["data_steps"]
     head = ("| arm | overrides | steps | samples/s | val loss | x0 RMS error | boundary step mean / max | "
             "inside step mean / max | unguided: no warp / in free cells | guided: no warp / in free cells / near goal "
-            "| guided boundary / inside step | Fast-MCTD success | plan s |\n|" + "---|" * 13)
+            "| guided boundary / inside step | Fast-MCTD success | plan s | core share |\n|" + "---|" * 14)
     lines = [head]
     for r in rows:
         p = r["precision"]
@@ -200,7 +214,8 @@ def table(rows: list[dict[str, Any]], arms: dict[str, Arm]) -> str:
             f"{p['inside_mean']:.2f} / {p['inside_max']:.2f} | {100 * r['unguided_no_warp']:.0f}% / "
             f"{100 * r['unguided_in_free']:.1f}% | {100 * r['guided_no_warp']:.0f}% / {100 * r['guided_in_free']:.1f}% / "
             f"{100 * r['guided_near_goal']:.0f}% | {r['guided_boundary_step']:.2f} / {r['guided_inside_step']:.2f} | "
-            f"{r['fast_mctd_success']}/{r['fast_mctd_episodes']} | {r['fast_mctd_plan_s']:.1f} |")
+            f"{r['fast_mctd_success']}/{r['fast_mctd_episodes']} | {r['fast_mctd_plan_s']:.1f} | "
+            f"{'?' if r.get('core_share') is None else format(r['core_share'], '.2f')} |")
     lines.append(f"\n(x0 error and steps at timestep {PRECISION_T}, world units; the data's own steps: boundary "
                  f"{d['boundary_mean']:.2f} / {d['boundary_max']:.2f}, inside {d['inside_mean']:.2f} / "
                  f"{d['inside_max']:.2f}. Fast-MCTD: {rows[0]['grid'].replace(rows[0]['arm'], '<arm>')}.)")
