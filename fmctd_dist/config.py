@@ -22,14 +22,11 @@ from omegaconf import MISSING, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
 from fmctd_dist.errors import ConfigError, did_you_mean, unknown_name
+from fmctd_dist.families import ANT_ENVS, CUBE_ENVS, ENV_NAMES, MAZES, POINT_ENVS  # noqa: F401 - re-exported
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 CONFIG_DIR = REPO_ROOT / "configs"
 
-MAZES = ("medium", "large", "giant")
-POINT_ENVS = tuple(f"pointmaze-{m}" for m in MAZES)
-ANT_ENVS = tuple(f"antmaze-{m}" for m in MAZES)
-ENV_NAMES = POINT_ENVS + ANT_ENVS
 UNET_PADDINGS = ("zeros", "replicate")
 TASK_IDS = (1, 2, 3, 4, 5)
 DEVICES = ("cpu", "cuda", "auto")
@@ -137,7 +134,8 @@ THREADS = "0 = torch's default; 1 when other jobs share the cores"
 
 @dataclass
 class EnvConfig:
-    name: str = spec("pointmaze-medium", choices=ENV_NAMES)  # pointmaze-{medium,large,giant} | antmaze-{...}
+    # pointmaze-{medium,large,giant} | antmaze-{...} | cube-{single,double,triple} (cubes: data only so far)
+    name: str = spec("pointmaze-medium", choices=ENV_NAMES)
     protocol: str = spec("fixed", choices=PROTOCOLS)  # fixed: start/goal at cell centres (paper); ogbench: stock +-1 noise
     max_steps: int = spec(500, gt=0, why="env steps of one episode (500 medium/large, 1000 giant)")
     horizon: int = spec(500, gt=0, why="planning horizon in env steps (500 medium/large, 1000 giant)")
@@ -150,7 +148,8 @@ class DataConfig:
     seed: int = spec(0, ge=0, why=SEED)  # generator seed: same seed -> same bytes
     episodes: int = spec(1000, gt=0, why="OGBench navigate: 1000 (giant 500)")  # training episodes
     episode_steps: int = spec(1001, gt=1, why="OGBench: 1001 (giant 2001)")  # steps per episode
-    noise: float = spec(0.5, ge=0, why="action noise std (pointmaze oracle 0.5, antmaze expert 0.2)")
+    noise: float = spec(0.5, ge=0, why="action noise std (pointmaze oracle 0.5, antmaze expert 0.2, "
+                                        "cube plan oracle 0.1)")
     expert: str = "checkpoints/ant-expert"  # antmaze only: the ant expert dir whose actions make the data
     val_fraction: float = spec(0.1, ge=0, le=1, why="extra validation episodes as a fraction of data.episodes")
     train_window: int = spec(500, gt=0, why="raw env steps in one training window (= env.horizon)")

@@ -34,6 +34,7 @@ from fmctd_dist.envs import make_env
 from fmctd_dist.envs.maze import MazeGeometry
 from fmctd_dist.envs.pointmaze import NOISE, GOAL_TOLERANCE, PointMaze
 from fmctd_dist.errors import DatasetError
+from fmctd_dist.families import MAZE_FAMILIES, require_family
 
 GENERATOR_VERSION = 1
 SPLITS = {"train": 0, "val": 1}  # split id feeds the per-episode seed
@@ -172,6 +173,7 @@ def generator_version(env: str) -> int:
 
 def make_dataset(cfg: Config, progress: bool = True) -> tuple[Path, dict[str, Any]]:
     """Generate (or verify an existing) dataset; return its dir and manifest."""
+    require_family(cfg.env.name, MAZE_FAMILIES, "the navigate-data code (data/dataset.py, used by jobs/train.py)")
     out = dataset_dir(cfg)
     if (out / "manifest.json").exists():
         return out, load_manifest(out, cfg, verify=True)
@@ -223,6 +225,9 @@ def load_manifest(path: Path, cfg: Config | None = None, verify: bool = True) ->
         manifest = json.loads(mf.read_text())
     except json.JSONDecodeError as e:
         raise DatasetError(f"{mf} is not valid JSON ({e}); delete {path} and regenerate") from None
+    if cfg is not None and isinstance(manifest, dict) and manifest.get("env") != cfg.env.name:  # before any field
+        raise DatasetError(f"{path} holds data of env={manifest.get('env')!r}, but the config asks for "
+                           f"env.name={cfg.env.name}; point the loader at a {cfg.env.name} dataset")
     for key in MANIFEST_FIELDS:
         if key not in manifest:
             raise DatasetError(f"{mf} lacks the field {key!r}; delete {path} and regenerate it")
@@ -272,6 +277,7 @@ class NavigateDataset:
 
 
 def load_dataset(cfg: Config, path: Path | None = None) -> NavigateDataset:
+    require_family(cfg.env.name, MAZE_FAMILIES, "the navigate-data code (data/dataset.py, used by jobs/train.py)")
     path = path or dataset_dir(cfg)
     manifest = load_manifest(path, cfg, verify=True)
     splits = {}

@@ -13,8 +13,9 @@ from functools import lru_cache
 
 import numpy as np
 
-from fmctd_dist.config import ENV_NAMES, TASK_IDS
-from fmctd_dist.errors import ConfigError, unknown_name
+from fmctd_dist.config import TASK_IDS
+from fmctd_dist.errors import ConfigError
+from fmctd_dist.families import MAZE_FAMILIES, require_family
 
 MAZE_UNIT = 4.0
 OFFSET = 4.0  # OGBench: cell (i, j) centre = (4j - 4, 4i - 4)
@@ -114,9 +115,8 @@ class MazeGeometry:
 
 
 def check_env_name(name: str) -> str:
-    if name not in ENV_NAMES:
-        raise unknown_name("env.name", name, ENV_NAMES)
-    return name
+    """``name`` if it is a maze env; an unknown name or a cube env is one ConfigError."""
+    return require_family(name, MAZE_FAMILIES, "the maze code (geometry, PointMaze / AntMaze episodes)")
 
 
 @lru_cache(maxsize=None)

@@ -1,0 +1,74 @@
+"""Env families: which env names exist, which family each belongs to, and what its planner models.
+
+A family (design item 12) is an env module + a data module + configs (+ value rules and a
+controller): PointMaze (``envs/pointmaze.py``, ``data/dataset.py``), AntMaze (``envs/antmaze.py``,
+``data/ant_dataset.py``) and the robot-arm cubes (``envs/cube.py``, ``data/cube_dataset.py``).
+This registry sits below all of them and imports nothing of ours but the errors, so config,
+envs and data can ask it without import cycles; ``search/``, ``denoiser/`` and ``evaluation/``
+never branch on a family.
+
+Code written for some families only guards its entry with :func:`require_family`, so a name
+from another family stops there with one ConfigError instead of a crash deeper down.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from fmctd_dist.errors import ConfigError, unknown_name
+
+MAZES = ("medium", "large", "giant")
+POINT_ENVS = tuple(f"pointmaze-{m}" for m in MAZES)
+ANT_ENVS = tuple(f"antmaze-{m}" for m in MAZES)
+CUBE_TYPES = ("single", "double", "triple")  # OGBench CubeEnv env_type
+CUBE_ENVS = tuple(f"cube-{c}" for c in CUBE_TYPES)
+MAZE_ENVS = POINT_ENVS + ANT_ENVS
+ENV_NAMES = MAZE_ENVS + CUBE_ENVS
+
+MAZE_FAMILIES = ("pointmaze", "antmaze")
+CUBE_NOT_BUILT = "cube models, the cube policy and the cube planner are not built yet (issues 19 and 20)"
+
+
+@dataclass(frozen=True)
+class EnvSpec:
+    """One env name: its family and the planner state the diffusion model works on."""
+
+    name: str  # e.g. pointmaze-medium, cube-double
+    family: str  # pointmaze | antmaze | cube
+    state_dim: int  # planner state per frame: maze x, y (2) | cube xyz in obs units (3 per cube)
+    state: str  # what the planner state is, in words (for messages and manifests)
+
+
+ENVS: dict[str, EnvSpec] = {
+    **{n: EnvSpec(n, "pointmaze", 2, "x, y") for n in POINT_ENVS},
+    **{n: EnvSpec(n, "antmaze", 2, "torso x, y") for n in ANT_ENVS},
+    **{f"cube-{c}": EnvSpec(f"cube-{c}", "cube", 3 * (i + 1), f"xyz of {i + 1} cube(s) in obs units")
+       for i, c in enumerate(CUBE_TYPES)},
+}
+
+
+def env_spec(name: str, field: str = "env.name") -> EnvSpec:
+    """The spec of ``name``; an unknown name is one ConfigError with the closest valid one."""
+    if name not in ENVS:
+        raise unknown_name(field, name, ENV_NAMES)
+    return ENVS[name]
+
+
+def family(name: str) -> str:
+    return env_spec(name).family
+
+
+def state_dim(name: str) -> int:
+    return env_spec(name).state_dim
+
+
+def require_family(name: str, families: tuple[str, ...], what: str) -> str:
+    """``name`` if its family is one of ``families``; else one ConfigError saying what is not built for it."""
+    spec = env_spec(name)
+    if spec.family in families:
+        return name
+    if spec.family == "cube":
+        raise ConfigError(f"env.name={name} is a cube env, but {what} is built for mazes only; {CUBE_NOT_BUILT}. "
+                          f"What exists for cubes: python jobs/make_dataset.py env={name}")
+    raise ConfigError(f"env.name={name} is a {spec.family} env, but {what} is built for "
+                      f"{' / '.join(families)} envs only")
