@@ -41,6 +41,7 @@ MODEL_NORMS = ("post", "pre")
 GUIDANCE_PATHS = ("input", "network")
 LR_SCHEDULES = ("constant", "cosine")
 PRECISIONS = ("fp32", "bf16")
+BUDGET_CLOCKS = ("wall", "cpu")
 
 # Top-level shorthands accepted on the command line (`tasks=[1] seeds=[0] runner=local`).
 ALIASES = {"tasks": "eval.tasks", "seeds": "eval.seeds", "runner": "eval.runner"}
@@ -229,6 +230,9 @@ class TrainConfig:
     precision: str = spec("fp32", choices=PRECISIONS)  # fp32 (paper) | bf16: autocast for the training step
     time_budget_s: float = spec(0.0, ge=0, why="stop (with a checkpoint) once the run's recorded wall time reaches "
                                                 "this many seconds, so recipe arms get equal wall-clock; 0 = none")
+    # What time_budget_s counts: wall seconds, or this process's CPU seconds (fair between recipe arms
+    # trained one after another while other jobs load the machine; use with train.threads=1)
+    budget_clock: str = spec("wall", choices=BUDGET_CLOCKS)
 
 
 @dataclass

@@ -43,7 +43,9 @@ NAME = re.compile(r"^[A-Za-z0-9_.+-]+$")
 PRECISION_T = 19  # the lowest-noise timestep of the precision probe (2% of 1000): the last DDIM level
 RUN_FOREVER = "train.max_steps=1000000"  # arms stop on their wall-clock budget, not a step count
 SECTION = "### Recipe bench (issue 17)"
-INTRO = ("Arms trained from the same seed for the same wall-clock budget (`train.time_budget_s`, one core each), "
+INTRO = ("Arms trained from the same seed for the same time budget (`train.time_budget_s`, one core each; "
+         "with `train.budget_clock=cpu` the budget counts the training process's CPU seconds, which stays fair "
+         "when other jobs share the machine), "
          "then measured side by side: `python jobs/bench_recipe.py` (the exact command above each table). "
          "samples/s = steps x batch / recorded training wall time; x0 error and steps at timestep 19 "
          "(the last DDIM level) on 64 validation windows; plan quality from 100 unguided and 100 guided "
@@ -93,7 +95,8 @@ def finished(ckpt: Path, budget_s: float) -> bool:
     if not path.exists():
         return False
     m = json.loads(path.read_text())
-    return m["config"]["train"]["time_budget_s"] == budget_s and m["wall_time_s"] >= budget_s
+    used = m.get("cpu_time_s", 0.0) if m["config"]["train"].get("budget_clock") == "cpu" else m["wall_time_s"]
+    return m["config"]["train"]["time_budget_s"] == budget_s and used >= budget_s
 
 
 def evaluated(out: Path, ckpt: Path) -> bool:

@@ -192,3 +192,24 @@ def test_time_budget_stops_with_a_checkpoint_and_resumes(tmp_path):
     assert again["step"] == out["step"] and again["resumed_from"] == out["step"]  # budget spent: nothing to do
     more = train(tiny_cfg(10**6, "train.time_budget_s=2.0", *words), FakeData(), tmp_path, progress=False)
     assert more["resumed_from"] == out["step"] and more["step"] > out["step"] and more["wall_time_s"] >= 2.0
+
+
+def test_cpu_budget_clock_counts_process_cpu_time(tmp_path):
+    """train.budget_clock=cpu: a run stops on its own CPU seconds, so a sleeping (starved) process trains on."""
+    import time as _time
+
+    words = ("train.ckpt_every=100000", "train.val_every=100000", "train.budget_clock=cpu", "train.threads=1")
+    real = FakeData.sample
+
+    def slow(self, rng, batch):  # wall time passes without this process computing (as when other jobs run)
+        _time.sleep(0.05)
+        return real(self, rng, batch)
+
+    FakeData.sample = slow
+    try:
+        out = train(tiny_cfg(10**6, "train.time_budget_s=0.5", *words), FakeData(), tmp_path, progress=False)
+    finally:
+        FakeData.sample = real
+    manifest = json.loads((tmp_path / MANIFEST_FILE).read_text())
+    assert manifest["cpu_time_s"] >= 0.5 and manifest["wall_time_s"] > manifest["cpu_time_s"]
+    assert manifest["config"]["train"]["budget_clock"] == "cpu" and out["step"] > 0

@@ -5,7 +5,8 @@ sequences the pyramid schedule (and hence the tree search) will show it. The loo
 model + manifest + train_state every ``ckpt_every`` steps; rerunning the same command
 continues from the last save with optimiser and RNG states restored, so a killed run and
 an uninterrupted one produce the same weights (bitwise on CPU). ``train.time_budget_s`` stops
-a run once its recorded wall time reaches the budget (recipe arms at equal wall-clock); the
+a run once its recorded wall time (or, ``train.budget_clock=cpu``, its CPU time) reaches the budget
+(recipe arms at equal compute); the
 recipe levers ``train.lr_schedule`` and ``train.precision`` (bf16 autocast of the training
 step) default to the paper's constant LR and fp32.
 """
@@ -170,9 +171,15 @@ def lr_at(cfg: Config, step: int, wall_s: float = 0.0) -> float:
     return lr * 0.5 * (1.0 + math.cos(math.pi * min(done, 1.0)))
 
 
-def out_of_time(cfg: Config, wall_s: float) -> bool:
-    """The run's recorded wall time has reached train.time_budget_s (never, when it is 0)."""
-    return 0 < cfg.train.time_budget_s <= wall_s
+def out_of_time(cfg: Config, used_s: float) -> bool:
+    """The run's recorded budget time has reached train.time_budget_s (never, when it is 0)."""
+    return 0 < cfg.train.time_budget_s <= used_s
+
+
+def budget_time(cfg: Config, wall_s: float, cpu_s: float) -> float:
+    """What train.time_budget_s counts: wall seconds, or (train.budget_clock=cpu) this process's CPU
+    seconds, which stay fair between recipe arms when other jobs share the cores (train.threads=1)."""
+    return cpu_s if cfg.train.budget_clock == "cpu" else wall_s
 
 
 @torch.no_grad()
@@ -200,7 +207,7 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
     loss_fn = make_loss(cfg, device)
     rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence([tc.seed, data.seed])))
     gen = torch.Generator(device=device).manual_seed(tc.seed)
-    step, wall, history, resumed_from = 0, 0.0, {"val": [], "train": []}, None
+    step, wall, cpu, history, resumed_from = 0, 0.0, 0.0, {"val": [], "train": []}, None
     init_from = None  # provenance of train.init_from weights, kept by every later save and resume
     ema = copy.deepcopy(model).requires_grad_(False)  # what gets shipped (ema_decay=0: a plain copy)
 
@@ -213,9 +220,10 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
         rng.bit_generator.state = state["numpy_rng"]
         gen.set_state(state["torch_rng"])
         step, wall, history = int(state["step"]), float(state["wall_time_s"]), state["history"]
+        cpu = float(state.get("cpu_time_s", wall))
         init_from = state.get("init_from")
         resumed_from = step
-        if step >= tc.max_steps or out_of_time(cfg, wall):
+        if step >= tc.max_steps or out_of_time(cfg, budget_time(cfg, wall, cpu)):
             return _summary(step, wall, history, out_dir, model, resumed_from)
     elif (out_dir / "manifest.json").exists():
         # A shipped checkpoint (model.pt + manifest, no train_state.pt: that is not committed).
@@ -229,11 +237,12 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
         model.load_state_dict(shipped.state_dict())
         ema.load_state_dict(shipped.state_dict())
         step, wall = int(manifest["train_steps"]), float(manifest["wall_time_s"])
+        cpu = float(manifest.get("cpu_time_s", wall))
         init_from = manifest.get("init_from")
         history = {"val": [list(v) for v in manifest.get("val_history", [])], "train": [],
                    "optimizer_reset_at": [step]}
         resumed_from = step
-        if step >= tc.max_steps or out_of_time(cfg, wall):
+        if step >= tc.max_steps or out_of_time(cfg, budget_time(cfg, wall, cpu)):
             return _summary(step, wall, history, out_dir, model, resumed_from)
     elif tc.init_from:
         weights, init_from = load_init_weights(resolve_path(tc.init_from), cfg)
@@ -250,11 +259,11 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
     def save() -> None:
         summary = _summary(step, wall, history, out_dir, model, resumed_from)
         save_checkpoint(out_dir, ema, {**base, "ema_decay": tc.ema_decay, "config": cfg.to_dict(),
-                                       "train_steps": step, "wall_time_s": wall, "vs_paper": vs_paper(cfg, step),
+                                       "train_steps": step, "wall_time_s": wall, "cpu_time_s": cpu, "vs_paper": vs_paper(cfg, step),
                                        "final_losses": summary["final_losses"], "val_history": history["val"]})
         save_train_state(out_dir, {
             "model": module_state(model), "ema": module_state(ema), "optimizer": opt.state_dict(),
-            "step": step, "wall_time_s": wall,
+            "step": step, "wall_time_s": wall, "cpu_time_s": cpu,
             "numpy_rng": rng.bit_generator.state, "torch_rng": gen.get_state(), "history": history,
             "config": cfg.to_dict(), "dataset_digest": data.digest, "n_tokens": cfg.n_tokens, "init_from": init_from,
         })
@@ -262,7 +271,7 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
     model.train()
     bar = tqdm(total=tc.max_steps, initial=step, disable=not progress, desc="train", dynamic_ncols=True)
     running, n_running, t_log = torch.zeros((), device=device), 0, time.perf_counter()
-    t_seg = time.perf_counter()
+    t_seg, c_seg = time.perf_counter(), time.process_time()
     while step < tc.max_steps:
         x0 = torch.as_tensor(data.sample(rng, tc.batch_size), dtype=torch.float32, device=device)
         if x0.shape[1:] != (cfg.n_tokens, cfg.token_dim):
@@ -271,7 +280,7 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
                 f"({cfg.n_tokens}, {cfg.token_dim}); data.train_window, env.horizon, jump and model.frame_stack "
                 "must describe the same windows"
             )
-        elapsed = wall + time.perf_counter() - t_seg
+        elapsed = budget_time(cfg, wall + time.perf_counter() - t_seg, cpu + time.process_time() - c_seg)
         for group in opt.param_groups:
             group["lr"] = lr_at(cfg, step, elapsed)
         with torch.autocast(device.type, dtype=torch.bfloat16, enabled=tc.precision == "bf16"):
@@ -283,7 +292,8 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
         step += 1
         running += loss.detach()
         n_running += 1
-        last = step == tc.max_steps or out_of_time(cfg, wall + time.perf_counter() - t_seg)
+        last = step == tc.max_steps or out_of_time(
+            cfg, budget_time(cfg, wall + time.perf_counter() - t_seg, cpu + time.process_time() - c_seg))
         if step % LOG_EVERY == 0 or last:
             mean = float(running) / n_running
             if not np.isfinite(mean):
@@ -296,9 +306,9 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
         if tc.val_every > 0 and (step % tc.val_every == 0 or last):
             history["val"].append([step, validation_loss(ema, loss_fn, val, device)])
         if step % tc.ckpt_every == 0 or last:
-            now = time.perf_counter()
-            wall += now - t_seg
-            t_seg = now
+            now, cnow = time.perf_counter(), time.process_time()
+            wall, cpu = wall + now - t_seg, cpu + cnow - c_seg
+            t_seg, c_seg = now, cnow
             save()
         if last:
             break
