@@ -196,6 +196,10 @@ class DiffusionConfig:
     # estimate; network: through the network branch only, model.param's skip path held constant
     # (the same as input for model.param=x0, which has none)
     guidance_path: str = spec("input", choices=GUIDANCE_PATHS)
+    # How denoisers run the network (issue 22): fp32 (reference) | bf16 (weights stored bf16, autocast);
+    # compile: torch.compile with one graph per micro-batch shape. Off until measured (docs/results.md 6).
+    precision: str = spec("fp32", choices=PRECISIONS)
+    compile: bool = False
 
 
 @dataclass

@@ -2,7 +2,7 @@
 
     python jobs/bench_denoiser.py                                  # every shipped checkpoint
     python jobs/bench_denoiser.py checkpoints/pointmaze-medium-h5  # one
-    python jobs/bench_denoiser.py --throughput                     # transitions/s table only
+    python jobs/bench_denoiser.py --throughput options=fp32,bf16,compiled,bf16+compiled   # speed per option
     python jobs/bench_denoiser.py --precision checkpoints/pointmaze-medium-h1   # why plans warp
 
 Quality, per checkpoint: validation loss (manifest), then 100 unguided and 100 guided plans
@@ -45,36 +45,98 @@ def precision_lines(ckpt: Path, batch: int = 64, timesteps: tuple[int, ...] = ()
     return lines
 
 
-def throughput(batches=(1, 25, 200), tokens=(11, 21, 51, 101), width=128, layers=6, reps=3) -> list[str]:
+OPTIONS = {"fp32": ("fp32", False), "bf16": ("bf16", False), "compiled": ("fp32", True),
+           "bf16+compiled": ("bf16", True)}  # name -> (diffusion.precision, diffusion.compile)
+
+
+def peak_flops(dtype: torch.dtype, device: str = "cpu", n: int = 2048, reps: int = 5) -> float:
+    """FLOP/s of a large square matmul in ``dtype``: the machine's practical peak, measured in this run."""
+    a, b = torch.randn(n, n, device=device).to(dtype), torch.randn(n, n, device=device).to(dtype)
+    a @ b
+    _sync(device)
+    t0 = time.perf_counter()
+    for _ in range(reps):
+        a @ b
+    _sync(device)
+    return 2 * n**3 * reps / (time.perf_counter() - t0)
+
+
+def transition_flops(model: DFTransformer, batch: int, tokens: int) -> float:
+    """FLOPs of one guided transition, counted from the shapes: forward (every matmul, attention
+    included) plus the guidance backward to the input, which costs about one more forward."""
+    w = model.out.in_features
+    ff = model.blocks[0].ff1.out_features
+    per_token = (model.token_dim + w // 2) * w + w * w + w * model.token_dim  # init MLP + output layer
+    per_token += len(model.blocks) * (4 * w * w + 2 * w * ff + 2 * tokens * w)  # qkv, proj, FF, QK^T and AV
+    return 2 * 2 * per_token * tokens * batch
+
+
+def _sync(device: str) -> None:
+    if device.startswith("cuda"):
+        torch.cuda.synchronize()
+
+
+def throughput(batches=(1, 25, 200), tokens=(11, 21, 51, 101), options=("fp32", "bf16"), width=128, layers=6,
+               reps=3, device: str = "cpu") -> list[str]:
+    """Guided transitions/s (jobs x transitions per second) and utilisation per option, side by side.
+
+    Utilisation = counted FLOP/s over the peak of the option's dtype measured above (nanoGPT's MFU).
+    A compiled option's first call (compilation) is left out of the timing, as a long run amortises it.
+    """
     from fmctd_dist.config import DiffusionConfig
+    from fmctd_dist.denoiser.runtime import runtime_model
     from fmctd_dist.diffusion.sampler import make_consts, transition
 
-    consts = make_consts(DiffusionConfig())
-    lines = ["| tokens | batch 1 | batch 25 | batch 200 |", "|---|---|---|---|"]
+    consts = make_consts(DiffusionConfig(), device)
+    peaks = {"fp32": peak_flops(torch.float32, device), "bf16": peak_flops(torch.bfloat16, device)}
+    lines = [f"peak (2048^3 matmul): fp32 {peaks['fp32'] / 1e9:,.0f} GFLOP/s, bf16 {peaks['bf16'] / 1e9:,.0f} GFLOP/s; "
+             f"device {device}, torch threads {torch.get_num_threads()}", "",
+             "| tokens | batch | " + " | ".join(f"{o}: jobs/s (util.)" for o in options) + " | best / fp32 |",
+             "|---|---|" + "---|" * (len(options) + 1)]
     for t in tokens:
-        model = DFTransformer(20, t, width, layers, 4, 512).eval().requires_grad_(False)
-        cells = []
         for b in batches:
-            x = torch.randn(b, t, 20)
-            a = torch.full((b, t), 30)
-            a[:, 0] = 0
-            bl = (a - 1).clamp(min=0)
-            scale, s, g = torch.full((b,), 1.0), torch.zeros(b, 2), torch.ones(b, 2)
-            transition(model, consts, x, a, bl, scale, s, g)  # warm-up
-            t0 = time.perf_counter()
-            for _ in range(reps):
-                transition(model, consts, x, a, bl, scale, s, g)
-            dt = (time.perf_counter() - t0) / reps
-            cells.append(f"{b / dt:,.0f}")
-        lines.append(f"| {t} | " + " | ".join(cells) + " |")
+            cells, rates = [], {}
+            for opt in options:
+                precision, compiled = OPTIONS[opt]
+                torch.manual_seed(0)
+                base = DFTransformer(20, t, width, layers, 4, 512).to(device).eval().requires_grad_(False)
+                model = runtime_model(base, precision, compiled)
+                x = torch.randn(b, t, 20, device=device)
+                a = torch.full((b, t), 30, device=device)
+                a[:, 0] = 0
+                bl = (a - 1).clamp(min=0)
+                scale = torch.full((b,), 1.0, device=device)
+                s, g = torch.zeros(b, 2, device=device), torch.ones(b, 2, device=device)
+                transition(model, consts, x, a, bl, scale, s, g)  # warm-up (and compilation)
+                _sync(device)
+                t0 = time.perf_counter()
+                for _ in range(reps):
+                    transition(model, consts, x, a, bl, scale, s, g)
+                _sync(device)
+                dt = (time.perf_counter() - t0) / reps
+                rates[opt] = b / dt
+                util = transition_flops(base, b, t) / dt / peaks[precision]
+                cells.append(f"{b / dt:,.0f} ({100 * util:.0f}%)")
+            best = max(rates, key=rates.get)
+            ratio = f"{best} {rates[best] / rates['fp32']:.2f}x" if "fp32" in rates else "–"
+            lines.append(f"| {t} | {b} | " + " | ".join(cells) + f" | {ratio} |")
     return lines
 
 
 def main(argv: list[str]) -> None:
     torch.manual_seed(0)
     if argv and argv[0] == "--throughput":
-        print(f"guided transitions/s (jobs x transitions per second), torch threads={torch.get_num_threads()}")
-        print("\n".join(throughput()))
+        # --throughput [options=fp32,bf16,compiled,bf16+compiled] [batches=1,25,200] [tokens=11,21,51,101] [device=cpu]
+        kw = dict(a.split("=", 1) for a in argv[1:])
+        unknown = set(kw) - {"options", "batches", "tokens", "device"}
+        opts = tuple(kw.get("options", "fp32,bf16").split(","))
+        if unknown or not set(opts) <= set(OPTIONS):
+            raise SystemExit(f"bench_denoiser --throughput: unknown {sorted(unknown) or sorted(set(opts) - set(OPTIONS))}; "
+                             f"options are {', '.join(OPTIONS)}")
+        ints = lambda k, d: tuple(int(v) for v in kw.get(k, d).split(","))  # noqa: E731
+        print("guided transitions/s (jobs x transitions per second) and utilisation, one run:")
+        print("\n".join(throughput(ints("batches", "1,25,200"), ints("tokens", "11,21,51,101"), opts,
+                                   device=kw.get("device", "cpu"))))
         return
     if argv and argv[0] == "--precision":
         for a in argv[1:]:

@@ -16,6 +16,7 @@ import torch
 
 from fmctd_dist.config import Config, DiffusionConfig
 from fmctd_dist.denoiser.protocol import DenoiseBatch, DenoiseResult, micro_batch_indices
+from fmctd_dist.denoiser.runtime import runtime_model
 from fmctd_dist.device import resolve_device
 from fmctd_dist.diffusion.model import DFTransformer
 from fmctd_dist.diffusion.sampler import make_consts, run_levels
@@ -33,6 +34,9 @@ class LocalDenoiser:
         self.device = resolve_device(device)
         self.model = model.to(self.device).eval()
         self.model.requires_grad_(False)  # guidance needs d/dx only, never parameter grads
+        # what runs the network: fp32 eager (reference), bf16 weights + autocast, and/or compiled
+        self.precision, self.compiled = diffusion_cfg.precision, diffusion_cfg.compile
+        self.net = runtime_model(self.model, self.precision, self.compiled)
         self.consts = make_consts(diffusion_cfg, self.device)
         self.guidance_path = diffusion_cfg.guidance_path  # through the whole x0 estimate, or its network branch
         self.micro_batch = micro_batch
@@ -66,14 +70,14 @@ class LocalDenoiser:
             x0=np.concatenate(x0s) if x0s else empty,
             denoise_time_s=seconds,
             stats={"micro_batches": len(xs), "padded_jobs": padded, "model_calls": calls.get("model_calls", 0),
-                   "device": str(self.device)},
+                   "device": str(self.device), "precision": self.precision, "compiled": self.compiled},
         )
 
     def _run(self, mb: DenoiseBatch, stats: dict) -> tuple[np.ndarray, np.ndarray, float]:
         dev = self.device
         t0 = time.perf_counter()
         x, x0 = run_levels(
-            self.model, self.consts,
+            self.net, self.consts,
             torch.as_tensor(mb.x, dtype=torch.float32, device=dev),
             torch.as_tensor(mb.levels, dtype=torch.long, device=dev),
             torch.as_tensor(mb.scale, dtype=torch.float32, device=dev),
@@ -82,6 +86,7 @@ class LocalDenoiser:
             stats,
             None if mb.noise_seed is None else torch.as_tensor(mb.noise_seed, dtype=torch.long),
             self.guidance_path,
+            self.compiled,
         )
         x, x0 = x.cpu().numpy(), x0.cpu().numpy()  # waits for the device
         return x, x0, time.perf_counter() - t0

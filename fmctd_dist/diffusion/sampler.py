@@ -88,12 +88,13 @@ def goal_reward(x0: torch.Tensor, start: torch.Tensor, goal: torch.Tensor) -> to
 
 def transition(model: nn.Module, c: SamplerConsts, x: torch.Tensor, a: torch.Tensor, b: torch.Tensor,
                scale: torch.Tensor, start: torch.Tensor, goal: torch.Tensor,
-               guidance_path: str = "input") -> tuple[torch.Tensor, torch.Tensor]:
+               guidance_path: str = "input", force_grad: bool = False) -> tuple[torch.Tensor, torch.Tensor]:
     """One DDIM step from levels a to b. x: [B, T, D]; a, b: [B, T] long; scale: [B].
 
     Returns (x_next, x0_hat), both [B, T, D]; for guided jobs x0_hat is the guided x0'. Tokens
     with a == b (and token 0, the context, always) come back bit-identical; x0_hat of a clean
-    token is the token itself.
+    token is the token itself. ``force_grad`` runs the network in grad mode even when no job is
+    guided (a compiled network's bits may depend on the grad mode; see denoiser.runtime).
     """
     clean = (a == 0)[..., None]
     x_in = torch.where(clean, c.sqrt_ab_in[0] * x, x)  # clean tokens: "stabilised" context
@@ -101,7 +102,7 @@ def transition(model: nn.Module, c: SamplerConsts, x: torch.Tensor, a: torch.Ten
     sa, s1a = c.sqrt_ab_in[a][..., None], c.sqrt_1m_ab_in[a][..., None]
     sb, s1b = c.sqrt_ab_out[b][..., None], c.sqrt_1m_ab_out[b][..., None]
     guided = scale != 0  # [B]
-    if bool(guided.any()):
+    if force_grad or bool(guided.any()):
         with torch.enable_grad():
             xg = x_in.detach().requires_grad_(True)
             x0 = model(xg, t_in) if guidance_path == "input" else model(xg, t_in, skip_grad=False)
@@ -147,7 +148,8 @@ def renoise_draws(seeds: torch.Tensor, row: int, shape: tuple[int, ...], device:
 
 def run_levels(model: nn.Module, c: SamplerConsts, x: torch.Tensor, levels: torch.Tensor, scale: torch.Tensor,
                start: torch.Tensor, goal: torch.Tensor, stats: dict | None = None,
-               noise_seed: torch.Tensor | None = None, guidance_path: str = "input") -> tuple[torch.Tensor, torch.Tensor]:
+               noise_seed: torch.Tensor | None = None, guidance_path: str = "input",
+               force_grad: bool = False) -> tuple[torch.Tensor, torch.Tensor]:
     """Run levels [B, R+1, T] (row r -> r+1 per transition) on x [B, T, D].
 
     scale [B], start/goal [B, d], noise_seed [B] (needed only if some row goes up). Returns
@@ -170,7 +172,8 @@ def run_levels(model: nn.Module, c: SamplerConsts, x: torch.Tensor, levels: torc
             x = renoise(c, x, levels[:, r], levels[:, r + 1], z)
         if not active:
             continue
-        x, x0_r = transition(model, c, x, levels[:, r], levels[:, r + 1], scale, start, goal, guidance_path)
+        x, x0_r = transition(model, c, x, levels[:, r], levels[:, r + 1], scale, start, goal, guidance_path,
+                             force_grad)
         x0 = torch.where(down[:, r].any(dim=1)[:, None, None], x0_r, x0)
         calls += 1
     if stats is not None:

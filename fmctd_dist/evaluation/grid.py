@@ -79,7 +79,8 @@ def provenance(p: Prepared, n_actors: int) -> dict[str, Any]:
             "checkpoint_digest": p.checkpoint_digest, **identity_columns(p.cfg),
             "parallel": m.parallel, "virtual_weight": m.virtual_weight, "redundancy_aware": m.redundancy_aware,
             "leaf_parallel": m.leaf_parallel, "jump": p.cfg.jump, "budget": m.budget,
-            "episode_time_limit": p.cfg.eval.episode_time_limit}
+            "episode_time_limit": p.cfg.eval.episode_time_limit,
+            "precision": p.cfg.diffusion.precision, "compiled": p.cfg.diffusion.compile}
 
 
 def run_local(p: Prepared, store: ResultStore, progress: bool = True,
