@@ -11,6 +11,7 @@ field and the fix.
 from __future__ import annotations
 
 import json
+import shlex
 from pathlib import Path
 from typing import Any
 
@@ -20,7 +21,7 @@ import torch
 from fmctd_dist.ant.config import DEFAULT_OUT, expert_config_from_dict
 from fmctd_dist.ant.direction_env import ACT_DIM, OBS_DIM, PROPRIO_DIM
 from fmctd_dist.ant.sac import Actor
-from fmctd_dist.diffusion.checkpoint import atomic_torch_save, module_state, sha256_file, write_manifest
+from fmctd_dist.diffusion.checkpoint import atomic_torch_save, first_line, module_state, sha256_file, write_manifest
 from fmctd_dist.errors import CheckpointError
 
 MODEL_FILE = "model.pt"
@@ -30,6 +31,16 @@ FORMAT_VERSION = 1
 OBS_LAYOUT = (f"[{OBS_DIM}] = OGBench ant qpos[2:] + qvel ({PROPRIO_DIM}, the 29-D ant observation without x, y) "
               "+ unit direction (2); build it with fmctd_dist.ant.direction_env.expert_input(ob, direction)")
 TRAIN_FIX = f"train one with `python jobs/train_expert.py expert.out={DEFAULT_OUT}`"
+
+
+def train_fix(ckpt_dir: str | Path, broken: bool = False) -> str:
+    """The command that writes an expert where the caller looked (a broken dir is moved aside first)."""
+    from fmctd_dist.hints import shown, word
+
+    cmd = f"python jobs/train_expert.py {word('expert.out', shown(ckpt_dir))}"
+    if broken:
+        cmd = f"mv {shlex.quote(shown(ckpt_dir))} {shlex.quote(shown(ckpt_dir) + '.broken')} && {cmd}"
+    return f"train one with `{cmd}`"
 
 
 def save_expert(out_dir: str | Path, actor: Actor, fields: dict[str, Any]) -> dict[str, Any]:
@@ -52,16 +63,16 @@ def read_expert_manifest(ckpt_dir: str | Path) -> dict[str, Any]:
     ckpt_dir = Path(ckpt_dir)
     for path in (ckpt_dir, ckpt_dir / MODEL_FILE, ckpt_dir / MANIFEST_FILE):
         if not path.exists():
-            raise CheckpointError(f"ant expert: {path} does not exist; {TRAIN_FIX} (or point to its dir)")
+            raise CheckpointError(f"ant expert: {path} does not exist; {train_fix(ckpt_dir)} (or point to its dir)")
     try:
         manifest = json.loads((ckpt_dir / MANIFEST_FILE).read_text())
     except (OSError, json.JSONDecodeError) as e:
-        raise CheckpointError(f"ant expert: {ckpt_dir / MANIFEST_FILE} is unreadable ({e}); {TRAIN_FIX}") from None
+        raise CheckpointError(f"ant expert: {ckpt_dir / MANIFEST_FILE} is unreadable ({e}); {train_fix(ckpt_dir, broken=True)}") from None
     if manifest.get("kind") != KIND:
         what = manifest.get("kind") or manifest.get("model_kind") or "unknown"
         raise CheckpointError(
             f"ant expert: {ckpt_dir} holds a {what!r} checkpoint (manifest kind={what!r}), not an ant direction "
-            f"expert (kind={KIND!r}); point to the dir written by jobs/train_expert.py, or {TRAIN_FIX}"
+            f"expert (kind={KIND!r}); point to the dir written by jobs/train_expert.py, or {train_fix(ckpt_dir, broken=True)}"
         )
     return manifest
 
@@ -94,7 +105,7 @@ def load_expert(ckpt_dir: str | Path, obs_dim: int = OBS_DIM, act_dim: int = ACT
     if sha != manifest.get("model_sha256"):
         raise CheckpointError(
             f"ant expert {ckpt_dir}: {MODEL_FILE} has sha256 {sha[:16]}... but manifest.json records "
-            f"{str(manifest.get('model_sha256'))[:16]}... (corrupt or overwritten); {TRAIN_FIX}"
+            f"{str(manifest.get('model_sha256'))[:16]}... (corrupt or overwritten); {train_fix(ckpt_dir, broken=True)}"
         )
     for name, have, want in (("obs_dim", manifest.get("obs_dim"), obs_dim),
                              ("act_dim", manifest.get("act_dim"), act_dim)):
@@ -108,5 +119,5 @@ def load_expert(ckpt_dir: str | Path, obs_dim: int = OBS_DIM, act_dim: int = ACT
         actor = Actor(manifest["obs_dim"], manifest["act_dim"], list(cfg.sac.hidden))
         actor.load_state_dict(torch.load(ckpt_dir / MODEL_FILE, map_location="cpu", weights_only=True), strict=True)
     except Exception as e:  # noqa: BLE001 - any unpickling/shape/config failure means a bad checkpoint
-        raise CheckpointError(f"ant expert {ckpt_dir}: {MODEL_FILE} does not load ({e}); {TRAIN_FIX}") from None
+        raise CheckpointError(f"ant expert {ckpt_dir}: {MODEL_FILE} does not load ({first_line(e)}); {train_fix(ckpt_dir, broken=True)}") from None
     return AntExpert(actor, manifest, ckpt_dir)

@@ -26,7 +26,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from fmctd_dist.diffusion.checkpoint import atomic_torch_save, module_state, sha256_file, write_manifest
+from fmctd_dist.diffusion.checkpoint import atomic_torch_save, first_line, module_state, sha256_file, write_manifest
 from fmctd_dist.envs.antmaze import ACT_DIM, OBS_DIM
 from fmctd_dist.errors import CheckpointError
 
@@ -175,5 +175,5 @@ def load_policy(ckpt_dir: str | Path, env_name: str | None = None, obs_dim: int 
         net = GoalPolicyNet(list(cfg.policy.hidden))
         net.load_state_dict(torch.load(ckpt_dir / MODEL_FILE, map_location="cpu", weights_only=True), strict=True)
     except Exception as e:  # noqa: BLE001 - any unpickling/shape/config failure means a bad checkpoint
-        raise CheckpointError(f"ant policy {ckpt_dir}: {MODEL_FILE} does not load ({e}); {fix}") from None
+        raise CheckpointError(f"ant policy {ckpt_dir}: {MODEL_FILE} does not load ({first_line(e)}); {fix}") from None
     return AntPolicy(net, manifest, ckpt_dir)

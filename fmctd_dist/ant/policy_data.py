@@ -29,6 +29,7 @@ import numpy as np
 
 from fmctd_dist.config import Config
 from fmctd_dist.data.dataset import dataset_dir, load_manifest
+from fmctd_dist.data.npz import load_npz
 from fmctd_dist.envs.antmaze import ACT_DIM, OBS_DIM, healthy, upright
 from fmctd_dist.errors import DatasetError
 
@@ -104,11 +105,11 @@ def load_policy_data(cfg: Config, drop_fallen: bool,
                            f"{OBS_DIM}-D ant state (an antmaze-* dataset from jobs/make_dataset.py)")
     out = []
     for split in ("train", "val"):
-        try:
-            with np.load(path / f"{split}.npz", allow_pickle=False) as z:
-                arrays = {k: z[k] for k in ("observations", "actions", "goals")}
-        except (KeyError, ValueError, OSError) as e:
-            raise DatasetError(f"{path / f'{split}.npz'} is malformed ({e}); delete {path} and regenerate") from None
+        e, s = manifest["episodes"][split], manifest["episode_steps"]
+        arrays = load_npz(path / f"{split}.npz", {"observations": (np.float32, (e, s, OBS_DIM)),
+                                                  "actions": (np.float32, (e, s, ACT_DIM)),
+                                                  "goals": (np.float32, (e, s, 2))},
+                          f"it does not match {path / 'manifest.json'}; delete {path} and regenerate")
         rows = make_rows(arrays["observations"], arrays["actions"], arrays["goals"], drop_fallen)
         if rows.valid.size == 0:
             raise DatasetError(f"{path / f'{split}.npz'} has no row to train on (every ant fell, or episodes of one "

@@ -27,7 +27,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from fmctd_dist.config import Config, is_ant, resolve_path
-from fmctd_dist.data.npz import save_npz
+from fmctd_dist.data.npz import load_npz, save_npz
 from fmctd_dist.data.oracle import NoisyOracle
 from fmctd_dist.data.tokens import Normaliser
 from fmctd_dist.envs import make_env
@@ -213,24 +213,61 @@ def make_dataset(cfg: Config, progress: bool = True) -> tuple[Path, dict[str, An
     return out, manifest
 
 
+def _int(v: Any) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+def _manifest_type_error(m: dict[str, Any]) -> str:
+    """'' if the fields loaders index into have their JSON types, else what is wrong with the first bad one."""
+    splits = ("train", "val")
+    checks = [
+        ("episode_steps", _int(m["episode_steps"]) and m["episode_steps"] > 1, "an integer > 1"),
+        ("episodes", isinstance(m["episodes"], dict) and all(_int(m["episodes"].get(k)) and m["episodes"][k] > 0
+                                                              for k in splits),
+         "an object {train: int, val: int} of positive counts"),
+        ("sha256", isinstance(m["sha256"], dict) and all(isinstance(m["sha256"].get(k), str) for k in splits),
+         "an object {train: hex, val: hex}"),
+        ("obs_mean", isinstance(m["obs_mean"], list) and len(m["obs_mean"]) == 2
+         and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in m["obs_mean"]), "a list of 2 numbers"),
+        ("obs_std", isinstance(m["obs_std"], list) and len(m["obs_std"]) == 2
+         and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in m["obs_std"]), "a list of 2 numbers"),
+    ]
+    if "obs_dim" in m:
+        checks.append(("obs_dim", _int(m["obs_dim"]) and m["obs_dim"] >= 2, "an integer >= 2"))
+    for key, ok, want in checks:
+        if not ok:
+            return f"{key} is {json.dumps(m[key])[:60]} but must be {want}"
+    return ""
+
+
 def load_manifest(path: Path, cfg: Config | None = None, verify: bool = True) -> dict[str, Any]:
     """Read and check a manifest (fields, config agreement, file sha256)."""
     mf = path / "manifest.json"
     if not mf.is_file():
-        raise DatasetError(
-            f"no dataset at {path} (manifest.json missing); create it with "
-            f"`python jobs/make_dataset.py env={cfg.env.name if cfg else '<env>'}`"
-        )
+        if cfg is None:
+            fix = "create it with `python jobs/make_dataset.py env=<env> data.root=<root>`"
+        else:
+            from fmctd_dist.hints import dataset_command
+
+            fix = f"create it with `{dataset_command(cfg)}`"
+            if path.resolve() != dataset_dir(cfg).resolve():
+                fix += f" (that writes {dataset_dir(cfg)}; point the loader there)"
+        raise DatasetError(f"no dataset at {path} (manifest.json missing); {fix}")
     try:
         manifest = json.loads(mf.read_text())
     except json.JSONDecodeError as e:
         raise DatasetError(f"{mf} is not valid JSON ({e}); delete {path} and regenerate") from None
+    if not isinstance(manifest, dict):
+        raise DatasetError(f"{mf} holds a JSON {type(manifest).__name__}, not an object; delete {path} and regenerate")
     if cfg is not None and isinstance(manifest, dict) and manifest.get("env") != cfg.env.name:  # before any field
         raise DatasetError(f"{path} holds data of env={manifest.get('env')!r}, but the config asks for "
                            f"env.name={cfg.env.name}; point the loader at a {cfg.env.name} dataset")
     for key in MANIFEST_FIELDS:
         if key not in manifest:
             raise DatasetError(f"{mf} lacks the field {key!r}; delete {path} and regenerate it")
+    bad = _manifest_type_error(manifest)
+    if bad:
+        raise DatasetError(f"{mf} is malformed: {bad}; delete {path} and regenerate it")
     version = generator_version(str(manifest["env"]))
     if manifest["generator_version"] != version:
         raise DatasetError(
@@ -282,14 +319,8 @@ def load_dataset(cfg: Config, path: Path | None = None) -> NavigateDataset:
     manifest = load_manifest(path, cfg, verify=True)
     splits = {}
     for split in ("train", "val"):
-        try:
-            with np.load(path / f"{split}.npz", allow_pickle=False) as z:
-                obs = z["observations"]
-        except (KeyError, ValueError, OSError) as e:
-            raise DatasetError(f"{path / f'{split}.npz'} is malformed ({e}); delete {path} and regenerate") from None
         want = (manifest["episodes"][split], manifest["episode_steps"], manifest.get("obs_dim", 2))
-        if obs.shape != want:
-            raise DatasetError(f"{path / f'{split}.npz'}: observations shape {obs.shape} != manifest {want}; "
-                               "delete the directory and regenerate")
+        obs = load_npz(path / f"{split}.npz", {"observations": (np.float32, want)},
+                       f"it does not match {path / 'manifest.json'}; delete {path} and regenerate")["observations"]
         splits[split] = np.ascontiguousarray(obs[..., :2], dtype=np.float32)  # ant: x, y of the 29-D state
     return NavigateDataset(path, manifest, splits["train"], splits["val"])

@@ -13,18 +13,21 @@ import dataclasses
 import hashlib
 import json
 import os
+import pickle
+import shlex
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 import torch
 from torch import nn
 
-from fmctd_dist.config import REPO_ROOT, Config, ModelConfig
+from fmctd_dist.config import REPO_ROOT, Config, ModelConfig, resolve_path
 from fmctd_dist.data.tokens import Normaliser
 from fmctd_dist.diffusion.model import DFTransformer
 from fmctd_dist.diffusion.models import build_model, diffusion_config_from_dict, model_config_from_dict
 from fmctd_dist.errors import CheckpointError
+from fmctd_dist.hints import shown, train_command, training_words, word
 
 MODEL_FILE = "model.pt"
 MANIFEST_FILE = "manifest.json"
@@ -103,47 +106,230 @@ def _json_default(o: Any) -> Any:
     raise TypeError(f"{type(o).__name__} is not JSON serialisable")
 
 
-def _train_fix(cfg: Config | None) -> str:
-    if cfg is None:
-        return "train one with `python jobs/train.py env=<env> jump=<H>`"
-    default = ModelConfig()
-    extra = "".join(f" model.{f}={str(getattr(cfg.model, f)).replace(' ', '')}" for f in _model_fields(cfg)
-                    if getattr(cfg.model, f) != getattr(default, f))
-    out = cfg.checkpoint_dir()
+def first_line(e: BaseException) -> str:
+    """An exception as one short line (torch's unpickling errors run to a page of advice)."""
+    text = str(e).strip().splitlines()
+    return f"{type(e).__name__}: {text[0][:200] if text else ''}"
+
+
+UNPICKLE_WHY = "not a plain tensor state_dict (torch.load(weights_only=True) refused it: pickled code or objects?)"
+
+
+def torch_load_weights(path: Path, where: str, fix: str) -> Any:
+    """``torch.load(path, weights_only=True)``; anything that does not load is one CheckpointError.
+
+    weights_only=True unpickles tensors and plain containers only, so a file carrying code
+    (a ``__reduce__`` payload) is refused before any of it runs.
+    """
     try:
-        out = out.relative_to(REPO_ROOT)
-    except ValueError:
-        pass
-    return f"train one with `python jobs/train.py env={cfg.env.name} jump={cfg.jump}{extra} train.out={out}`"
+        return torch.load(path, map_location="cpu", weights_only=True)
+    except pickle.UnpicklingError as e:
+        raise CheckpointError(f"{where}: {path.name} is {UNPICKLE_WHY} ({first_line(e)}); {fix}") from None
+    except Exception as e:  # noqa: BLE001 - truncated zip, bad magic, ...: a bad file either way
+        raise CheckpointError(f"{where}: {path.name} does not load ({first_line(e)}); {fix}") from None
+
+
+def _fresh_dir(cfg: Config) -> Path:
+    """A new checkpoint dir for cfg's model when the expected one holds another model (never overwritten)."""
+    tag = hashlib.sha256(" ".join(training_words(cfg)).encode()).hexdigest()[:8]
+    return REPO_ROOT / "runs" / f"{cfg.run_name}-{tag}"
+
+
+def _tracked(path: Path) -> bool:
+    """True when ``path`` is a checkpoint shipped in git (then `git checkout` restores it)."""
+    import subprocess
+
+    try:
+        out = subprocess.run(["git", "ls-files", "--error-unmatch", str(path / MODEL_FILE), str(path / MANIFEST_FILE)],
+                             cwd=REPO_ROOT, capture_output=True, text=True, timeout=10)
+        return out.returncode == 0
+    except (OSError, subprocess.SubprocessError):
+        return False
+
+
+def _train_fix(cfg: Config | None, where: str | Path | None = None, broken: bool = False) -> str:
+    """The command that makes what loading cfg's model from ``where`` (default cfg.checkpoint_dir()) needs.
+
+    ``broken``: ``where`` exists but holds a corrupt, partial or unreadable checkpoint. jobs/train.py
+    continues what its train.out dir holds, so the broken one is restored from git (a shipped
+    checkpoint) or moved aside first.
+    """
+    if cfg is None:
+        return "train one with `python jobs/train.py env=<env> jump=<H> train.out=<dir>`"
+    out = Path(where) if where is not None else cfg.checkpoint_dir()
+    train = train_command(cfg, out)
+    if not broken:
+        return f"train one with `{train}`"
+    aside = f"mv {shlex.quote(shown(out))} {shlex.quote(shown(out) + '.broken')} && {train}"
+    if _tracked(out):
+        return f"restore the shipped one with `git checkout -- {shown(out)}`, or train one with `{aside}`"
+    return f"train one with `{aside}`"
 
 
 def read_manifest(ckpt_dir: str | Path, cfg: Config | None = None) -> dict[str, Any]:
     """The manifest of a checkpoint dir; CheckpointError if the dir or its files are missing."""
     ckpt_dir = Path(ckpt_dir)
-    for path in (ckpt_dir, ckpt_dir / MODEL_FILE, ckpt_dir / MANIFEST_FILE):
+    if not ckpt_dir.exists():
+        raise CheckpointError(f"checkpoint: {ckpt_dir} does not exist; {_train_fix(cfg, ckpt_dir)} "
+                              "or set checkpoint=<dir>")
+    for path in (ckpt_dir / MODEL_FILE, ckpt_dir / MANIFEST_FILE):
         if not path.exists():
-            raise CheckpointError(f"checkpoint: {path} does not exist; {_train_fix(cfg)} or set checkpoint=<dir>")
+            raise CheckpointError(f"checkpoint: {path} does not exist (an incomplete checkpoint dir); "
+                                  f"{_train_fix(cfg, ckpt_dir, broken=True)} or set checkpoint=<dir>")
+    path = ckpt_dir / MANIFEST_FILE
     try:
-        return json.loads((ckpt_dir / MANIFEST_FILE).read_text())
-    except (OSError, json.JSONDecodeError) as e:
-        path = ckpt_dir / MANIFEST_FILE
-        raise CheckpointError(f"checkpoint: {path} is unreadable ({e}); {_train_fix(cfg)}") from None
+        manifest = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise CheckpointError(f"checkpoint: {path} is unreadable ({first_line(e)}); "
+                              f"{_train_fix(cfg, ckpt_dir, broken=True)}") from None
+    bad = manifest_type_error(manifest)
+    if bad:
+        raise CheckpointError(f"checkpoint: {path} is malformed: {bad}; it was not written by jobs/train.py "
+                              f"(or was edited since); {_train_fix(cfg, ckpt_dir, broken=True)}")
+    return manifest
 
 
-def check_compatible(manifest: dict[str, Any], cfg: Config, where: str | Path) -> None:
-    """Raise one CheckpointError naming the first field where checkpoint and config disagree."""
+def _is_int(v: Any) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+def _is_num(v: Any) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def _numbers(v: Any) -> bool:
+    return isinstance(v, list) and len(v) > 0 and all(_is_num(x) for x in v)
+
+
+# What every load path reads from a manifest, and the JSON type it must have there.
+MANIFEST_TYPES: dict[str, tuple[Callable[[Any], bool], str]] = {
+    "config": (lambda v: isinstance(v, dict), "an object (Config.to_dict())"),
+    "config.env": (lambda v: isinstance(v, dict), "an object"),
+    "config.env.name": (lambda v: isinstance(v, str), "a string"),
+    "config.model": (lambda v: isinstance(v, dict), "an object"),
+    "config.jump": (lambda v: _is_int(v) and v > 0, "a positive integer"),
+    "n_tokens": (lambda v: _is_int(v) and v > 0, "a positive integer"),
+    "token_dim": (lambda v: _is_int(v) and v > 0, "a positive integer"),
+    "model_sha256": (lambda v: isinstance(v, str) and len(v) == 64, "a 64-character sha256 hex string"),
+    "digest": (lambda v: isinstance(v, str) and len(v) == 16, "a 16-character hex string"),
+    "normaliser": (lambda v: isinstance(v, dict), "an object {mean, std}"),
+    "normaliser.mean": (_numbers, "a list of numbers"),
+    "normaliser.std": (_numbers, "a list of numbers"),
+}
+OPTIONAL_TYPES: dict[str, tuple[Callable[[Any], bool], str]] = {
+    "train_steps": (lambda v: _is_int(v) and v >= 0, "a non-negative integer"),
+    "wall_time_s": (_is_num, "a number"),
+    "dataset_digest": (lambda v: isinstance(v, str), "a string"),
+}
+
+
+def manifest_type_error(manifest: Any) -> str:
+    """'' if every field the loaders read has its JSON type, else what is wrong with the first bad one."""
+    if not isinstance(manifest, dict):
+        return f"the top level is a JSON {type(manifest).__name__}, not an object"
+    missing = object()
+
+    def get(dotted: str) -> Any:
+        node: Any = manifest
+        for part in dotted.split("."):
+            node = node.get(part, missing) if isinstance(node, dict) else missing
+        return node
+
+    for table, required in ((MANIFEST_TYPES, True), (OPTIONAL_TYPES, False)):
+        for key, (ok, want) in table.items():
+            v = get(key)
+            if v is missing:
+                if required:
+                    return f"the field {key!r} is missing"
+                continue
+            if not ok(v):
+                return f"{key} is {json.dumps(v)[:60]} ({type(v).__name__}) but must be {want}"
+    saved = manifest["config"]["model"]
+    for f in dataclasses.fields(ModelConfig):
+        if f.name not in saved:
+            continue  # older manifests lack newer fields (their defaults apply)
+        v, default = saved[f.name], getattr(ModelConfig(), f.name)
+        if isinstance(default, list):
+            good = isinstance(v, list) and all(_is_int(x) for x in v)
+        elif _is_int(default):
+            good = _is_int(v)
+        else:
+            good = isinstance(v, type(default))
+        if not good:
+            return (f"config.model.{f.name} is {json.dumps(v)[:60]} ({type(v).__name__}) but must be "
+                    f"{type(default).__name__} like the default {default!r}")
+    return ""
+
+
+def _mismatch(manifest: dict[str, Any], cfg: Config) -> tuple[str, Any, Any] | None:
+    """The first (field, checkpoint's value, config's value) where they disagree, or None."""
     saved = manifest.get("config", {})
     saved_model = _saved_model(manifest)
     pairs = [("env.name", saved.get("env", {}).get("name"), cfg.env.name), ("jump", saved.get("jump"), cfg.jump)]
     pairs += [(f"model.{f}", saved_model.get(f), getattr(cfg.model, f)) for f in _model_fields(cfg)]
     pairs += [("n_tokens", manifest.get("n_tokens"), cfg.n_tokens)]
-    for name, have, want in pairs:
-        if have != want:
-            hint = " (n_tokens = env.horizon / jump / model.frame_stack + 1)" if name == "n_tokens" else ""
-            raise CheckpointError(
-                f"checkpoint {where} was trained with {name}={have!r} but the config has {name}={want!r}{hint}; "
-                f"{_train_fix(cfg)}, or set {name}={have!r} to use this checkpoint"
-            )
+    return next(((name, have, want) for name, have, want in pairs if have != want), None)
+
+
+def _use_it(name: str, have: Any, cfg: Config) -> str:
+    """The words that make the config agree with the checkpoint on ``name``."""
+    if name == "n_tokens" and isinstance(have, int):
+        h = (have - 1) * cfg.jump * cfg.model.frame_stack
+        return f"set env.horizon={h} data.train_window={h}"
+    if name == "env.name":
+        return f"set env={have}"
+    if name == "model.kind":
+        return "use it with method=diffuser" if have == "diffuser" else "use it with a Diffusion Forcing method"
+    return f"set {word(name, have)}"
+
+
+def _model_elsewhere(cfg: Config, where: Path) -> str:
+    """How to get a model for cfg without overwriting the (intact, other) checkpoint at ``where``."""
+    default = resolve_path(f"checkpoints/{cfg.run_name}")
+    candidates = [(default, "drop checkpoint=")] if where.resolve() != default.resolve() else []
+    fresh = _fresh_dir(cfg)
+    candidates.append((fresh, f"set checkpoint={shlex.quote(shown(fresh))}"))
+    for path, use in candidates:
+        if not path.exists():
+            return f"train one with `{train_command(cfg, path)}` and {use}"
+        try:
+            if _mismatch(read_manifest(path), cfg) is None:
+                return f"{shown(path)} holds one: {use}"
+        except CheckpointError:
+            pass
+    return f"train one with `{train_command(cfg, fresh)}` and {candidates[-1][1]}"
+
+
+def check_compatible(manifest: dict[str, Any], cfg: Config, where: str | Path) -> None:
+    """Raise one CheckpointError naming the first field where checkpoint and config disagree.
+
+    The fix offers both ways out: the words that make the config fit this checkpoint, and a
+    model of the config's own shape (the expected dir if it holds one, else the command that
+    trains one into a dir that does not overwrite this checkpoint).
+    """
+    bad = _mismatch(manifest, cfg)
+    if bad is None:
+        return
+    name, have, want = bad
+    hint = " (n_tokens = env.horizon / jump / model.frame_stack + 1)" if name == "n_tokens" else ""
+    raise CheckpointError(
+        f"checkpoint {where} was trained with {name}={have!r} but the config has {name}={want!r}{hint}; "
+        f"to plan with this checkpoint {_use_it(name, have, cfg)}; for a model with {name}={want!r}, "
+        f"{_model_elsewhere(cfg, Path(where))}"
+    )
+
+
+def verify_checkpoint(ckpt_dir: str | Path, cfg: Config) -> dict[str, Any]:
+    """Everything a load of cfg's model from ckpt_dir checks short of unpickling it -> the manifest.
+
+    Present and complete, manifest well-typed, trained for cfg (env, jump, model, n_tokens),
+    model.pt's sha256 the manifest's. Jobs call this before any actor starts.
+    """
+    ckpt_dir = Path(ckpt_dir)
+    manifest = read_manifest(ckpt_dir, cfg)
+    check_compatible(manifest, cfg, ckpt_dir)
+    _verified_sha(ckpt_dir, manifest, f"checkpoint {ckpt_dir}", _train_fix(cfg, ckpt_dir, broken=True))
+    return manifest
 
 
 def _verified_sha(ckpt_dir: Path, manifest: dict[str, Any], where: str, fix: str) -> str:
@@ -167,20 +353,21 @@ def load_checkpoint(ckpt_dir: str | Path, cfg: Config | None = None,
     """
     ckpt_dir = Path(ckpt_dir)
     manifest = read_manifest(ckpt_dir, cfg)
-    sha = _verified_sha(ckpt_dir, manifest, f"checkpoint {ckpt_dir}", _train_fix(cfg))
+    if cfg is not None:  # before the sha: a checkpoint of another shape is named as such, corrupt or not
+        check_compatible(manifest, cfg, ckpt_dir)
+    sha = _verified_sha(ckpt_dir, manifest, f"checkpoint {ckpt_dir}", _train_fix(cfg, ckpt_dir, broken=True))
     if expect_digest is not None and expect_digest not in (manifest["digest"], sha):
         raise CheckpointError(
             f"checkpoint {ckpt_dir}: digest {manifest['digest']} differs from the expected {expect_digest}; "
             "the checkpoint changed since the run started; point checkpoint= at the original one"
         )
-    if cfg is not None:
-        check_compatible(manifest, cfg, ckpt_dir)
     model = model_from_manifest(manifest)
+    state = torch_load_weights(ckpt_dir / MODEL_FILE, f"checkpoint {ckpt_dir}", _train_fix(cfg, ckpt_dir, broken=True))
     try:
-        state = torch.load(ckpt_dir / MODEL_FILE, map_location="cpu", weights_only=True)
         model.load_state_dict(state, strict=True)
-    except Exception as e:  # noqa: BLE001 - any unpickling/shape failure means a bad checkpoint
-        raise CheckpointError(f"checkpoint {ckpt_dir}: {MODEL_FILE} does not load ({e}); {_train_fix(cfg)}") from None
+    except Exception as e:  # noqa: BLE001 - a state_dict of another shape (or not a state_dict) is a bad checkpoint
+        raise CheckpointError(f"checkpoint {ckpt_dir}: {MODEL_FILE} does not fit the model its manifest describes "
+                              f"({first_line(e)}); {_train_fix(cfg, ckpt_dir, broken=True)}") from None
     return model.eval(), manifest
 
 
@@ -199,7 +386,8 @@ def load_init_weights(ckpt_dir: str | Path, cfg: Config) -> tuple[dict[str, torc
             raise CheckpointError(f"train.init_from={ckpt_dir} has model.{f}={saved.get(f)!r} but the config has "
                                   f"model.{f}={getattr(cfg.model, f)!r}; set model.{f}={saved.get(f)!r} or start "
                                   "from scratch (train.init_from=)")
-    state = torch.load(ckpt_dir / MODEL_FILE, map_location="cpu", weights_only=True)
+    state = torch_load_weights(ckpt_dir / MODEL_FILE, f"train.init_from={ckpt_dir}",
+                               "point train.init_from at an intact checkpoint")
     provenance = {"path": str(ckpt_dir.relative_to(REPO_ROOT) if ckpt_dir.is_relative_to(REPO_ROOT) else ckpt_dir),
                   "digest": manifest["digest"], "env": manifest.get("config", {}).get("env", {}).get("name"),
                   "jump": manifest.get("config", {}).get("jump"), "train_steps": manifest.get("train_steps")}
@@ -231,12 +419,11 @@ def load_train_state(ckpt_dir: str | Path) -> dict[str, Any] | None:
     path = Path(ckpt_dir) / TRAIN_STATE_FILE
     if not path.exists():
         return None
-    try:
-        return torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as e:  # noqa: BLE001
-        raise CheckpointError(
-            f"checkpoint {path} is unreadable ({e}); delete it to restart training from scratch"
-        ) from None
+    state = torch_load_weights(path, f"checkpoint {path.parent}", f"delete {path} to restart training from scratch")
+    if not isinstance(state, dict):
+        raise CheckpointError(f"checkpoint {path.parent}: {path.name} is not a training state (a "
+                              f"{type(state).__name__}, not a dict); delete {path} to restart training from scratch")
+    return state
 
 
 def module_state(model: nn.Module) -> dict[str, torch.Tensor]:
