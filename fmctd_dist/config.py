@@ -23,6 +23,7 @@ from omegaconf.errors import OmegaConfBaseException
 
 from fmctd_dist.errors import ConfigError, did_you_mean, unknown_name
 from fmctd_dist.families import ANT_ENVS, CUBE_ENVS, ENV_NAMES, MAZES, POINT_ENVS  # noqa: F401 - re-exported
+from fmctd_dist.families import PENDING_FAMILIES, family, require_family
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 CONFIG_DIR = REPO_ROOT / "configs"
@@ -297,6 +298,21 @@ class RayConfig:
 
 
 @dataclass
+class VisualConfig:
+    """Visual PointMaze (issue 21): how frames are rendered, and which of the point maze's frames are."""
+
+    # MuJoCo's shadow map side in texels. 4096 (MuJoCo's default) draws OGBench's frames exactly and
+    # is the reference; 1024 renders 2-4x faster on CPU Mesa with ~0.3% of pixels off (shadow edges),
+    # bounded by tests/test_visual.py. Frames for training and for the env must use the same value.
+    shadowsize: int = spec(1024, ge=0, why="1024 (default, fast); 4096 = MuJoCo's default, the reference frames")
+    frames: int = spec(20000, gt=0, why="images in the VAE's seeded subset of the train split's frames")
+    frames_seed: int = spec(0, ge=0, why=SEED)  # which frames the subset holds: same seed -> same bytes
+    # Train episodes whose every frame is rendered and encoded for the planner's latent data, a
+    # seeded subset (recorded in the latent manifest); 0 = all of data.episodes
+    episodes: int = spec(100, ge=0, why="seeded subset of train episodes for the latent data; 0 = all")
+
+
+@dataclass
 class Config:
     env: EnvConfig = field(default_factory=EnvConfig)
     data: DataConfig = field(default_factory=DataConfig)
@@ -306,6 +322,7 @@ class Config:
     method: MethodConfig = field(default_factory=MethodConfig)
     eval: EvalConfig = field(default_factory=EvalConfig)
     ray: RayConfig = field(default_factory=RayConfig)
+    visual: VisualConfig = field(default_factory=VisualConfig)
     jump: int = spec(1, gt=0, why="H: plan on trajectories subsampled every H env steps (S-MCTD: 5)")
     device: str = spec("cpu", choices=DEVICES)  # cpu | cuda | auto
     checkpoint: str = ""  # checkpoint dir; "" -> checkpoints/<env>-h<jump> (model.kind=diffuser: <env>-diffuser)
@@ -452,11 +469,14 @@ def parse_overrides(args: list[str]) -> tuple[dict[str, str], list[tuple[str, st
     return groups, dotted
 
 
-def load_config(args: list[str] | None = None, *, env: str = "pointmaze-medium", method: str = "fast-mctd") -> Config:
+def load_config(args: list[str] | None = None, *, env: str = "pointmaze-medium", method: str = "fast-mctd",
+                serves: tuple[str, ...] = ()) -> Config:
     """Build and validate a Config from group defaults and ``key=value`` words.
 
     Order: dataclass defaults, configs/env/<env>.yaml, configs/method/<method>.yaml, then
     dotted overrides in the order given. ``env``/``method`` give the default group names.
+    An env of a family whose planner is not built yet (``PENDING_FAMILIES``) is one ConfigError
+    unless the job ``serves`` that family (jobs/render_frames.py serves the visual maze).
     """
     groups, dotted = parse_overrides(list(args or []))
     cfg = OmegaConf.structured(Config)
@@ -466,6 +486,8 @@ def load_config(args: list[str] | None = None, *, env: str = "pointmaze-medium",
         cfg = apply_override(cfg, key, value)
     obj: Config = OmegaConf.to_object(cfg)  # type: ignore[assignment]
     validate(obj)
+    if family(obj.env.name) in PENDING_FAMILIES and family(obj.env.name) not in serves:
+        require_family(obj.env.name, serves, "this job")
     return obj
 
 

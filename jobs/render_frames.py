@@ -1,0 +1,38 @@
+"""Render the visual maze's VAE images: a seeded subset of the point maze's train frames.
+
+    python jobs/make_dataset.py env=pointmaze-medium                     # states + actions (once)
+    python jobs/render_frames.py env=visual-pointmaze-medium             # 20,000 frames (visual.frames)
+    python jobs/render_frames.py env=visual-pointmaze-large visual.frames=2000 visual.frames_seed=1
+    python jobs/render_frames.py env=visual-pointmaze-medium visual.shadowsize=4096   # the reference frames, 2-4x slower
+
+Writes data/<env>-frames-seed<s>-n<N>-shadow<k>-data<seed>-<E>x<S>/ (frames.npz + manifest.json:
+seed, frame indices, dataset digest, renderer, sha256); the same config writes the same bytes.
+Rerunning verifies an existing directory instead of rendering again. Also prints which train
+episodes the planner's latent data uses (visual.episodes, seeded; 0 = all).
+"""
+
+import time
+
+from fmctd_dist.cli import run
+from fmctd_dist.config import load_config
+from fmctd_dist.data.visual_frames import episode_subset, make_frames
+
+
+def main(argv: list[str]) -> int:
+    t0 = time.time()
+    cfg = load_config(argv, env="visual-pointmaze-medium", method="mctd", serves=("visual-pointmaze",))
+    path, m = make_frames(cfg)
+    print(f"{path}: {m['frames']} frames of {m['point_env']} (train split, seed {m['frames_seed']}), "
+          f"sha256={m['sha256']}")
+    print(f"  dataset {m['dataset']['path']} (digest {m['dataset']['digest'][:16]})")
+    print(f"  renderer: {m['render']['gl']}, shadowsize {m['render']['shadowsize']}; when made: "
+          f"{m['generation']['frames_per_s']} frames/s")
+    eps = episode_subset(cfg)
+    print(f"  planner's latent data: {len(eps)} of {cfg.data.episodes} train episodes (visual.episodes="
+          f"{cfg.visual.episodes}): {eps[:8].tolist()}{' ...' if len(eps) > 8 else ''}")
+    print(f"done in {time.time() - t0:.1f}s")
+    return 0
+
+
+if __name__ == "__main__":
+    run(main)
