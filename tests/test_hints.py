@@ -128,3 +128,20 @@ def test_missing_dataset_hint_makes_that_dataset(tmp_path):
     run(suggested(e.value))
     ds = load_dataset(cfg)
     assert ds.train.shape == (2, 120, 2)
+
+
+def test_corrupt_dataset_hint_regenerates_it(tiny_dataset, tmp_path):
+    from fmctd_dist.data.dataset import load_dataset
+
+    data_cfg, path = tiny_dataset
+    shutil.copytree(path, tmp_path / path.name)
+    cfg = load_config(TINY_DATA + [f"data.root={tmp_path}"])
+    raw = bytearray((tmp_path / path.name / "val.npz").read_bytes())
+    raw[-10] ^= 0xFF
+    (tmp_path / path.name / "val.npz").write_bytes(bytes(raw))
+    with pytest.raises(DatasetError, match="corrupt") as e:
+        load_dataset(cfg)
+    cmd = suggested(e.value)
+    assert cmd.startswith(f"rm -r {tmp_path / path.name} && python jobs/make_dataset.py"), cmd
+    run(cmd)
+    assert load_dataset(cfg).manifest["sha256"] == load_dataset(data_cfg).manifest["sha256"]  # the same bytes again

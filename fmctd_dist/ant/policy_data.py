@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from fmctd_dist.config import Config
-from fmctd_dist.data.dataset import dataset_dir, load_manifest
+from fmctd_dist.data.dataset import dataset_dir, load_manifest, regenerate_fix
 from fmctd_dist.data.npz import load_npz
 from fmctd_dist.envs.antmaze import ACT_DIM, OBS_DIM, healthy, upright
 from fmctd_dist.errors import DatasetError
@@ -109,7 +109,7 @@ def load_policy_data(cfg: Config, drop_fallen: bool,
         arrays = load_npz(path / f"{split}.npz", {"observations": (np.float32, (e, s, OBS_DIM)),
                                                   "actions": (np.float32, (e, s, ACT_DIM)),
                                                   "goals": (np.float32, (e, s, 2))},
-                          f"it does not match {path / 'manifest.json'}; delete {path} and regenerate")
+                          f"it does not match {path / 'manifest.json'}; {regenerate_fix(path, cfg)}")
         rows = make_rows(arrays["observations"], arrays["actions"], arrays["goals"], drop_fallen)
         if rows.valid.size == 0:
             raise DatasetError(f"{path / f'{split}.npz'} has no row to train on (every ant fell, or episodes of one "

@@ -16,6 +16,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import shlex
 import shutil
 import time
 from collections.abc import Callable
@@ -178,7 +179,7 @@ def make_dataset(cfg: Config, progress: bool = True) -> tuple[Path, dict[str, An
     if (out / "manifest.json").exists():
         return out, load_manifest(out, cfg, verify=True)
     if out.exists() and any(out.iterdir()):
-        raise DatasetError(f"{out} exists but has no manifest.json (an interrupted run?); delete the directory and rerun")
+        raise DatasetError(f"{out} exists but has no manifest.json (an interrupted run?); {regenerate_fix(out, cfg)}")
     source = data_source(cfg)  # the ant expert is loaded and checked before anything is written
     tmp = out.with_name(out.name + ".tmp")
     shutil.rmtree(tmp, ignore_errors=True)
@@ -213,6 +214,18 @@ def make_dataset(cfg: Config, progress: bool = True) -> tuple[Path, dict[str, An
     return out, manifest
 
 
+def regenerate_fix(path: Path, cfg: Config | None) -> str:
+    """The command that replaces a broken dataset dir with the one cfg names (deterministic: same bytes)."""
+    if cfg is None:
+        return f"delete {path} and regenerate it with jobs/make_dataset.py"
+    from fmctd_dist.hints import dataset_command, shown
+
+    fix = f"regenerate it with `rm -r {shlex.quote(shown(path))} && {dataset_command(cfg)}`"
+    if Path(path).resolve() != dataset_dir(cfg).resolve():
+        fix += f" (that writes {dataset_dir(cfg)}; point the loader there)"
+    return fix
+
+
 def _int(v: Any) -> bool:
     return isinstance(v, int) and not isinstance(v, bool)
 
@@ -227,10 +240,10 @@ def _manifest_type_error(m: dict[str, Any]) -> str:
          "an object {train: int, val: int} of positive counts"),
         ("sha256", isinstance(m["sha256"], dict) and all(isinstance(m["sha256"].get(k), str) for k in splits),
          "an object {train: hex, val: hex}"),
-        ("obs_mean", isinstance(m["obs_mean"], list) and len(m["obs_mean"]) == 2
-         and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in m["obs_mean"]), "a list of 2 numbers"),
-        ("obs_std", isinstance(m["obs_std"], list) and len(m["obs_std"]) == 2
-         and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in m["obs_std"]), "a list of 2 numbers"),
+        ("obs_mean", isinstance(m["obs_mean"], list) and len(m["obs_mean"]) > 0
+         and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in m["obs_mean"]), "a list of numbers"),
+        ("obs_std", isinstance(m["obs_std"], list) and len(m["obs_std"]) > 0
+         and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in m["obs_std"]), "a list of numbers"),
     ]
     if "obs_dim" in m:
         checks.append(("obs_dim", _int(m["obs_dim"]) and m["obs_dim"] >= 2, "an integer >= 2"))
@@ -256,23 +269,23 @@ def load_manifest(path: Path, cfg: Config | None = None, verify: bool = True) ->
     try:
         manifest = json.loads(mf.read_text())
     except json.JSONDecodeError as e:
-        raise DatasetError(f"{mf} is not valid JSON ({e}); delete {path} and regenerate") from None
+        raise DatasetError(f"{mf} is not valid JSON ({e}); {regenerate_fix(path, cfg)}") from None
     if not isinstance(manifest, dict):
-        raise DatasetError(f"{mf} holds a JSON {type(manifest).__name__}, not an object; delete {path} and regenerate")
+        raise DatasetError(f"{mf} holds a JSON {type(manifest).__name__}, not an object; {regenerate_fix(path, cfg)}")
     if cfg is not None and isinstance(manifest, dict) and manifest.get("env") != cfg.env.name:  # before any field
         raise DatasetError(f"{path} holds data of env={manifest.get('env')!r}, but the config asks for "
                            f"env.name={cfg.env.name}; point the loader at a {cfg.env.name} dataset")
     for key in MANIFEST_FIELDS:
         if key not in manifest:
-            raise DatasetError(f"{mf} lacks the field {key!r}; delete {path} and regenerate it")
+            raise DatasetError(f"{mf} lacks the field {key!r}; {regenerate_fix(path, cfg)}")
     bad = _manifest_type_error(manifest)
     if bad:
-        raise DatasetError(f"{mf} is malformed: {bad}; delete {path} and regenerate it")
+        raise DatasetError(f"{mf} is malformed: {bad}; {regenerate_fix(path, cfg)}")
     version = generator_version(str(manifest["env"]))
     if manifest["generator_version"] != version:
         raise DatasetError(
             f"{mf}: generator_version={manifest['generator_version']} but this code writes {version}; "
-            f"delete {path} and regenerate"
+            f"{regenerate_fix(path, cfg)}"
         )
     if cfg is not None:
         expect = {"env": cfg.env.name, "seed": cfg.data.seed, "noise": cfg.data.noise,
@@ -280,7 +293,7 @@ def load_manifest(path: Path, cfg: Config | None = None, verify: bool = True) ->
         for key, want in expect.items():
             if manifest[key] != want:
                 raise DatasetError(f"{mf}: {key}={manifest[key]!r} but the config asks for {want!r}; "
-                                   f"regenerate or fix data.{key if key != 'env' else 'env.name'}")
+                                   f"{regenerate_fix(path, cfg)}, or fix data.{key if key != 'env' else 'env.name'}")
         if is_ant(cfg.env.name):
             from fmctd_dist.data.ant_dataset import check_expert_matches
 
@@ -289,9 +302,9 @@ def load_manifest(path: Path, cfg: Config | None = None, verify: bool = True) ->
         for split, digest in manifest["sha256"].items():
             f = path / f"{split}.npz"
             if not f.is_file():
-                raise DatasetError(f"{f} is missing; delete {path} and regenerate")
+                raise DatasetError(f"{f} is missing; {regenerate_fix(path, cfg)}")
             if sha256_file(f) != digest:
-                raise DatasetError(f"{f} is corrupt (sha256 differs from manifest.json); delete {path} and regenerate")
+                raise DatasetError(f"{f} is corrupt (sha256 differs from manifest.json); {regenerate_fix(path, cfg)}")
     return manifest
 
 
@@ -321,6 +334,6 @@ def load_dataset(cfg: Config, path: Path | None = None) -> NavigateDataset:
     for split in ("train", "val"):
         want = (manifest["episodes"][split], manifest["episode_steps"], manifest.get("obs_dim", 2))
         obs = load_npz(path / f"{split}.npz", {"observations": (np.float32, want)},
-                       f"it does not match {path / 'manifest.json'}; delete {path} and regenerate")["observations"]
+                       f"it does not match {path / 'manifest.json'}; {regenerate_fix(path, cfg)}")["observations"]
         splits[split] = np.ascontiguousarray(obs[..., :2], dtype=np.float32)  # ant: x, y of the 29-D state
     return NavigateDataset(path, manifest, splits["train"], splits["val"])
