@@ -219,3 +219,17 @@ def test_render_frames_job_refuses_and_names_the_fix(tmp_path):
                          cwd=REPO_ROOT, capture_output=True, text=True, timeout=120)
     assert out.returncode == 2, out.stderr
     assert out.stderr.startswith("error: ") and "jobs/make_dataset.py env=pointmaze-medium" in out.stderr
+
+
+def test_a_gl_backend_that_fails_to_load_is_one_error_line(tiny_dataset):
+    """A real failure, not a monkeypatch: MUJOCO_GL names no backend -> the job's one `error:` line."""
+    import os
+
+    data_cfg, _ = tiny_dataset
+    env = {**os.environ, "MUJOCO_GL": "no-such-backend"}
+    out = subprocess.run([sys.executable, "jobs/render_frames.py", f"env={MEDIUM}", f"data.root={data_cfg.data.root}",
+                          *[w for w in TINY_DATA if not w.startswith("env=")], "visual.frames=2"],
+                         cwd=REPO_ROOT, capture_output=True, text=True, timeout=120, env=env)
+    assert out.returncode == 2, out.stderr
+    assert "error: MuJoCo could not open a GL context (MUJOCO_GL=no-such-backend)" in out.stderr
+    assert "libegl1" in out.stderr and "Traceback" not in out.stderr

@@ -71,9 +71,12 @@ class FrameRenderer:
         if isinstance(shadowsize, bool) or not isinstance(shadowsize, int) or shadowsize < 0:
             raise ValueError(f"shadowsize={shadowsize!r} must be a non-negative int (4096 = MuJoCo's default)")
         self.camera, self.shadowsize, self.size = camera, shadowsize, size
-        import mujoco  # deferred: importing it picks the GL backend from MUJOCO_GL
-
+        try:
+            import mujoco  # deferred: importing it loads the GL backend MUJOCO_GL names
+        except Exception as e:  # e.g. MUJOCO_GL=osmesa without libOSMesa: PyOpenGL fails inside the import
+            raise _gl_error(e) from None
         self._mj = mujoco
+        _check_gl(size)
         self.model, top_down = _build_model(self.point_name, size)
         self.model.vis.quality.shadowsize = shadowsize
         self.data = mujoco.MjData(self.model)
@@ -101,6 +104,18 @@ class FrameRenderer:
 
     def close(self) -> None:
         self.renderer.close()
+
+
+def _check_gl(size: int) -> None:
+    """Open and free one GL context, so a missing backend is one DeviceError before any env is built."""
+    import mujoco
+
+    try:
+        ctx = mujoco.GLContext(size, size)  # None when MUJOCO_GL's backend failed to import
+        ctx.make_current()
+        ctx.free()
+    except Exception as e:  # ImportError, AttributeError / TypeError from a half-loaded backend, FatalError
+        raise _gl_error(e) from None
 
 
 def _build_model(point_name: str, size: int):
