@@ -1,12 +1,13 @@
-"""Render the visual maze's VAE images: a seeded subset of the point maze's train frames.
+"""Render the visual maze's VAE images: seeded subsets of the point maze's train and validation frames.
 
     python jobs/make_dataset.py env=pointmaze-medium                     # states + actions (once)
     python jobs/render_frames.py env=visual-pointmaze-medium             # 20,000 frames (visual.frames)
     python jobs/render_frames.py env=visual-pointmaze-large visual.frames=2000 visual.frames_seed=1
     python jobs/render_frames.py env=visual-pointmaze-medium visual.shadowsize=4096   # the reference frames, 2-4x slower
 
-Writes data/<env>-frames-seed<s>-n<N>-shadow<k>-data<seed>-<E>x<S>/ (frames.npz + manifest.json:
-seed, frame indices, dataset digest, renderer, sha256); the same config writes the same bytes.
+Writes data/<env>-frames-seed<s>-n<N>-shadow<k>-data<seed>-<E>x<S>/ (frames.npz: N train frames and
+N x data.val_fraction validation frames; manifest.json: seed, frame indices, dataset digests,
+renderer, sha256); the same config writes the same bytes.
 Rerunning verifies an existing directory instead of rendering again. Also prints which train
 episodes the planner's latent data uses (visual.episodes, seeded; 0 = all).
 """
@@ -22,8 +23,8 @@ def main(argv: list[str]) -> int:
     t0 = time.time()
     cfg = load_config(argv, env="visual-pointmaze-medium", method="mctd", serves=("visual-pointmaze",))
     path, m = make_frames(cfg)
-    print(f"{path}: {m['frames']} frames of {m['point_env']} (train split, seed {m['frames_seed']}), "
-          f"sha256={m['sha256']}")
+    print(f"{path}: {m['frames']} train + {m['val_frames']} validation frames of {m['point_env']} "
+          f"(seed {m['frames_seed']}), sha256={m['sha256']}")
     print(f"  dataset {m['dataset']['path']} (digest {m['dataset']['digest'][:16]})")
     print(f"  renderer: {m['render']['gl']}, shadowsize {m['render']['shadowsize']}; when made: "
           f"{m['generation']['frames_per_s']} frames/s")

@@ -173,7 +173,7 @@ def _visual_cfg(root, *extra):
 
 
 def test_frames_store_round_trip(tiny_dataset, tmp_path):
-    from fmctd_dist.data.visual_frames import episode_subset, frames_dir, load_frames, make_frames
+    from fmctd_dist.data.visual_frames import episode_frames, episode_subset, frames_dir, load_frames, make_frames
 
     data_cfg, _ = tiny_dataset
     cfg = _visual_cfg(data_cfg.data.root)
@@ -183,14 +183,26 @@ def test_frames_store_round_trip(tiny_dataset, tmp_path):
     shutil.rmtree(path)
     path2, m2 = make_frames(cfg, progress=False)  # rendered again from scratch
     assert m2["sha256"] == m["sha256"] == hashlib.sha256((copy / "frames.npz").read_bytes()).hexdigest()
-    images, index, _ = load_frames(cfg)
-    assert images.shape == (6, 64, 64, 3) and index.tolist() == m["frame_index"]
-    e, s = divmod(index, data_cfg.data.episode_steps)
-    xy = load_dataset(data_cfg).train[e, s]
-    assert np.array_equal(images, render_states(MEDIUM, xy, shadowsize=1024))  # state -> image
+    data = load_dataset(data_cfg)
+    for split, n in (("train", 6), ("val", 1)):  # val: 6 x data.val_fraction, at least 1
+        images, index, _ = load_frames(cfg, split)
+        assert images.shape == (n, 64, 64, 3) and index.tolist() == m["frame_index" if n == 6 else "val_frame_index"]
+        e, s = divmod(index, data_cfg.data.episode_steps)
+        xy = getattr(data, split)[e, s]
+        assert np.array_equal(images, render_states(MEDIUM, xy, shadowsize=1024))  # state -> image
     other = _visual_cfg(data_cfg.data.root, "visual.frames_seed=1")
     assert frames_dir(other) != path
-    assert len(episode_subset(_visual_cfg(data_cfg.data.root, "visual.episodes=3"))) == 3
+    few = _visual_cfg(data_cfg.data.root, "visual.episodes=2")
+    ids = episode_subset(few)
+    assert len(ids) == 2 and np.array_equal(ids, episode_subset(few))
+
+    class Positions:  # stands in for FrameRenderer: a frame is its position (rendering is tested above)
+        render = staticmethod(lambda xy: xy)
+
+    got = list(episode_frames(few, data, Positions()))
+    assert [g[0] for g in got] == ids.tolist()
+    for e, frames in got:
+        np.testing.assert_array_equal(frames, data.train[e])  # every step of the episode, in order
     np.testing.assert_array_equal(episode_subset(_visual_cfg(data_cfg.data.root, "visual.episodes=0")),
                                   np.arange(data_cfg.data.episodes))
     with open(path / "frames.npz", "r+b") as f:  # one flipped byte -> refused

@@ -5,11 +5,12 @@ The visual maze's data is the point maze's navigate data (BFS-subgoal oracle, no
 env=pointmaze-<maze>``. Raw images would be ~12 GB per maze, and CPU Mesa renders tens of frames
 per second (docs/results.md section 13), so we render only what training needs:
 
-- the VAE: a seeded subset of ``visual.frames`` train-split frames (this module: one .npz of uint8
-  images + a manifest with the seed, the frame indices, the dataset digest and sha256);
+- the VAE: a seeded subset of ``visual.frames`` train-split frames, plus ``data.val_fraction`` as
+  many from the validation split for held-out reconstruction error (this module: one .npz of
+  uint8 images + a manifest with the seed, the frame indices, the dataset digest and sha256);
 - the planner's latent data: every frame of ``visual.episodes`` seeded train episodes (0 = all),
-  rendered once and encoded by the VAE (:func:`episode_subset` says which; the latent store
-  records them in its manifest).
+  rendered once and encoded by the VAE (:func:`episode_subset` says which, :func:`episode_frames`
+  renders them; the latent store records them in its manifest).
 
 Same config -> same frame indices -> same bytes (``save_npz`` has fixed zip headers; MuJoCo +
 Mesa draw the same pixels for the same state on the same software stack, recorded below).
@@ -29,17 +30,17 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from fmctd_dist.config import REPO_ROOT, Config, resolve_path
-from fmctd_dist.data.dataset import load_dataset, sha256_file
+from fmctd_dist.data.dataset import SPLITS, NavigateDataset, load_dataset, sha256_file
 from fmctd_dist.data.npz import load_npz, save_npz
 from fmctd_dist.envs.visual_pointmaze import (CAMERA, CAMERA_POS, CAMERA_XYAXES, IMAGE_SIZE, FrameRenderer,
                                               point_env_name)
 from fmctd_dist.errors import ConfigError, DatasetError
 
-FRAMES_VERSION = 1
+FRAMES_VERSION = 2  # 2: validation frames beside the train ones
 CHUNK = 100  # frames per progress-bar step
 STREAM = 21  # second SeedSequence word: these draws differ from any other use of the same seed
-MANIFEST_FIELDS = ("version", "env", "point_env", "frames_seed", "frames", "frame_index", "dataset", "render",
-                   "sha256")
+MANIFEST_FIELDS = ("version", "env", "point_env", "frames_seed", "frames", "frame_index", "val_frames",
+                   "val_frame_index", "dataset", "render", "sha256")
 
 
 def point_config(cfg: Config) -> Config:
@@ -53,13 +54,13 @@ def frames_dir(cfg: Config) -> Path:
                                    f"-data{d.seed}-{d.episodes}x{d.episode_steps}")
 
 
-def frame_subset(seed: int, episodes: int, steps: int, n: int) -> np.ndarray:
-    """int64 [n] sorted flat indices (episode * steps + step), drawn without replacement from ``seed``."""
+def frame_subset(seed: int, episodes: int, steps: int, n: int, split: str = "train") -> np.ndarray:
+    """int64 [n] sorted flat indices (episode * steps + step) of ``split``, drawn without replacement from ``seed``."""
     total = episodes * steps
     if n > total:
-        raise ConfigError(f"visual.frames={n} exceeds the {total} train frames ({episodes} x {steps}); "
+        raise ConfigError(f"visual.frames={n} exceeds the {total} {split} frames ({episodes} x {steps}); "
                           f"use at most {total}")
-    rng = np.random.default_rng(np.random.SeedSequence([seed, STREAM]))
+    rng = np.random.default_rng(np.random.SeedSequence([seed, STREAM, SPLITS[split]]))
     return np.sort(rng.choice(total, size=n, replace=False)).astype(np.int64)
 
 
@@ -73,8 +74,17 @@ def episode_subset(cfg: Config) -> np.ndarray:
         return np.arange(total, dtype=np.int64)
     if n > total:
         raise ConfigError(f"visual.episodes={n} exceeds data.episodes={total}; use at most {total} (0 = all)")
-    rng = np.random.default_rng(np.random.SeedSequence([cfg.visual.frames_seed, STREAM, 1]))
+    rng = np.random.default_rng(np.random.SeedSequence([cfg.visual.frames_seed, STREAM, 99]))
     return np.sort(rng.choice(total, size=n, replace=False)).astype(np.int64)
+
+
+def episode_frames(cfg: Config, data: NavigateDataset, renderer: FrameRenderer):
+    """Yield (episode id, uint8 [S, 64, 64, 3]) for every train episode of :func:`episode_subset`, in order.
+
+    One episode's frames at a time (1001 frames = 12 MB), for the latent store to encode and drop.
+    """
+    for e in episode_subset(cfg):
+        yield int(e), renderer.render(data.train[e].astype(np.float64))
 
 
 def _shown(path: Path) -> str:
@@ -118,30 +128,38 @@ def make_frames(cfg: Config, progress: bool = True) -> tuple[Path, dict[str, Any
     if out.exists() and any(out.iterdir()):
         raise DatasetError(f"{out} exists but has no manifest.json (an interrupted run?); delete it and rerun")
     episodes, steps, _ = data.train.shape
-    index = frame_subset(cfg.visual.frames_seed, episodes, steps, cfg.visual.frames)
-    xy = data.train.reshape(-1, 2)[index].astype(np.float64)
+    n_val = min(max(1, round(cfg.visual.frames * cfg.data.val_fraction)), data.val.shape[0] * steps)
+    index = {"train": frame_subset(cfg.visual.frames_seed, episodes, steps, cfg.visual.frames),
+             "val": frame_subset(cfg.visual.frames_seed, data.val.shape[0], steps, n_val, "val")}
+    xy = {s: getattr(data, s).reshape(-1, 2)[index[s]].astype(np.float64) for s in index}
     renderer = FrameRenderer(cfg.env.name, shadowsize=cfg.visual.shadowsize)
-    images = np.empty((len(index), IMAGE_SIZE, IMAGE_SIZE, 3), dtype=np.uint8)
+    images = {s: np.empty((len(index[s]), IMAGE_SIZE, IMAGE_SIZE, 3), dtype=np.uint8) for s in index}
     t0 = time.perf_counter()
-    with tqdm(total=len(index), desc=f"render {cfg.env.name}", unit="frame", disable=not progress) as bar:
-        for a in range(0, len(index), CHUNK):
-            images[a:a + CHUNK] = renderer.render(xy[a:a + CHUNK])
-            bar.update(len(xy[a:a + CHUNK]))
+    total = sum(len(i) for i in index.values())
+    with tqdm(total=total, desc=f"render {cfg.env.name}", unit="frame", disable=not progress) as bar:
+        for s in index:
+            for a in range(0, len(index[s]), CHUNK):
+                images[s][a:a + CHUNK] = renderer.render(xy[s][a:a + CHUNK])
+                bar.update(len(xy[s][a:a + CHUNK]))
     wall = time.perf_counter() - t0
     info = render_info(renderer)
     renderer.close()
     tmp = out.with_name(out.name + ".tmp")
     shutil.rmtree(tmp, ignore_errors=True)
     tmp.mkdir(parents=True)
-    save_npz(tmp / "frames.npz", {"images": images, "frame_index": index, "xy": xy.astype(np.float32)})
+    save_npz(tmp / "frames.npz", {"images": images["train"], "frame_index": index["train"],
+                                  "xy": xy["train"].astype(np.float32), "val_images": images["val"],
+                                  "val_frame_index": index["val"], "val_xy": xy["val"].astype(np.float32)})
     manifest = {
         "version": FRAMES_VERSION, "env": cfg.env.name, "point_env": point_env_name(cfg.env.name),
-        "frames_seed": cfg.visual.frames_seed, "frames": len(index), "split": "train",
-        "frame_index": index.tolist(),  # flat: episode * episode_steps + step
-        "dataset": {"path": _shown(data.path), "digest": data.digest, "seed": cfg.data.seed,
-                    "episodes": episodes, "episode_steps": steps},
+        "frames_seed": cfg.visual.frames_seed, "frames": len(index["train"]), "val_frames": n_val,
+        "frame_index": index["train"].tolist(),  # flat: episode * episode_steps + step, train split
+        "val_frame_index": index["val"].tolist(),  # the same over the validation split's episodes
+        "dataset": {"path": _shown(data.path), "digest": data.digest, "val_digest": data.manifest["sha256"]["val"],
+                    "seed": cfg.data.seed, "episodes": episodes, "val_episodes": data.val.shape[0],
+                    "episode_steps": steps},
         "render": info, "sha256": sha256_file(tmp / "frames.npz"),
-        "generation": {"wall_s": round(wall, 2), "frames_per_s": round(len(index) / max(wall, 1e-9), 2)},
+        "generation": {"wall_s": round(wall, 2), "frames_per_s": round(total / max(wall, 1e-9), 2)},
     }
     (tmp / "manifest.json").write_text(json.dumps(manifest, indent=1, sort_keys=True) + "\n")
     os.replace(tmp, out)
@@ -178,14 +196,18 @@ def load_manifest(path: Path, cfg: Config, digest: str | None = None) -> dict[st
     return m
 
 
-def load_frames(cfg: Config, path: Path | None = None) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
-    """(images uint8 [N, 64, 64, 3], frame_index int64 [N], manifest), checked against ``cfg`` and sha256."""
+def load_frames(cfg: Config, split: str = "train",
+                path: Path | None = None) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
+    """(images uint8 [N, 64, 64, 3], frame_index int64 [N], manifest) of ``split``, checked against cfg and sha256."""
+    if split not in SPLITS:
+        raise ValueError(f"split={split!r}: use 'train' or 'val'")
     path = path or frames_dir(cfg)
     m = load_manifest(path, cfg)
-    n = m["frames"]
-    z = load_npz(path / "frames.npz", {"images": (np.uint8, (n, IMAGE_SIZE, IMAGE_SIZE, 3)),
-                                       "frame_index": (np.int64, (n,))},
+    pre = "" if split == "train" else "val_"
+    n = m[f"{pre}frames"]
+    z = load_npz(path / "frames.npz", {f"{pre}images": (np.uint8, (n, IMAGE_SIZE, IMAGE_SIZE, 3)),
+                                       f"{pre}frame_index": (np.int64, (n,))},
                  f"delete {path} and rerun jobs/render_frames.py")
-    if z["frame_index"].tolist() != m["frame_index"]:
-        raise DatasetError(f"{path / 'frames.npz'}: frame_index differs from its manifest; delete {path} and rerun")
-    return z["images"], z["frame_index"], m
+    if z[f"{pre}frame_index"].tolist() != m[f"{pre}frame_index"]:
+        raise DatasetError(f"{path / 'frames.npz'}: {pre}frame_index differs from its manifest; delete {path} and rerun")
+    return z[f"{pre}images"], z[f"{pre}frame_index"], m
