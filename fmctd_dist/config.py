@@ -302,7 +302,7 @@ class VisualConfig:
     """Visual PointMaze (issue 21): how frames are rendered, and which of the point maze's frames are."""
 
     # MuJoCo's shadow map side in texels. 4096 (MuJoCo's default) draws OGBench's frames exactly and
-    # is the reference; 1024 renders 2-4x faster on CPU Mesa with ~0.3% of pixels off (shadow edges),
+    # is the reference; 1024 renders 3-5x faster on CPU Mesa with ~0.3% of pixels off (shadow edges),
     # bounded by tests/test_visual.py. Frames for training and for the env must use the same value.
     shadowsize: int = spec(1024, ge=0, why="1024 (default, fast); 4096 = MuJoCo's default, the reference frames")
     frames: int = spec(20000, gt=0, why="images in the VAE's seeded subset of the train split's frames")
