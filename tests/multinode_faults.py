@@ -11,8 +11,8 @@ plan/trajectory bits) plus what was killed.
 - ``node``: remove the worker node that holds the most of the run's actors (denoisers, drivers, env actors).
 - ``actor``: kill an env actor (mid-episode: all pairs are busy while the queue is not empty), then,
   after the third row, a planner driver.
-- ``job``: `ray job stop` equivalent: SIGTERM the jobs/eval.py process running against this cluster
-  after its first row, then run the same command again.
+- ``job``: `ray job submit` jobs/eval.py to the head's job server, `ray job stop` it after its first
+  row (JobSubmissionClient.stop_job: SIGTERM to the entrypoint), then submit the same job again.
 """
 
 from __future__ import annotations
@@ -20,8 +20,8 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-import signal
-import subprocess
+import shlex
+import socket
 import sys
 import threading
 import time
@@ -44,6 +44,15 @@ import fmctd_dist.evaluation.ray_runner as rr  # noqa: E402
 from fmctd_dist.denoiser.ray_pool import DenoiserPool  # noqa: E402
 
 ARGS = json.loads(sys.argv[1])
+
+
+def _free_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+DASHBOARD_PORT = _free_port()  # the job server (`ray job submit/stop`) of the head; not the default 8265
 OUT = Path(ARGS["out"])
 ROWS = "*/*/task=*/seed=*.parquet"
 PAIRS: list[tuple] = []  # every (EnvActor, PlannerDriver) the runner made, in order
@@ -68,6 +77,10 @@ def recording_pool(cls, *a, **kw):
 rr.episode_pair_orig = _make_pair
 rr.episode_pair = recording_pair
 DenoiserPool.create = classmethod(recording_pool)
+
+
+def say(*a) -> None:
+    print(f"[{time.strftime('%H:%M:%S')}]", *a, file=sys.stderr, flush=True)
 
 
 def rows_of(run: str) -> list[dict]:
@@ -103,10 +116,17 @@ def evaluate(run: str) -> float:
 
 def main() -> None:
     t_start = time.monotonic()
-    cluster = Cluster(initialize_head=True, connect=False, head_node_args={"num_cpus": 1})
+    # the job server, and agent ports of our own: another Ray cluster on this machine (the test session's)
+    # holds the default ones
+    dashboard = {"include_dashboard": True, "dashboard_host": "127.0.0.1", "dashboard_port": DASHBOARD_PORT,
+                 **{k: _free_port() for k in ("dashboard_agent_listen_port", "runtime_env_agent_port",
+                                              "metrics_agent_port", "metrics_export_port")}}
+    cluster = Cluster(initialize_head=True, connect=False,
+                      head_node_args={"num_cpus": 1, **(dashboard if "job" in ARGS["scenarios"] else {})})
     workers = [cluster.add_node(num_cpus=1) for _ in range(2)]
     cluster.wait_for_nodes()
     ray.init(address=cluster.address, logging_level="ERROR", log_to_driver=False)
+    say("cluster up", cluster.address)
     report: dict = {"nodes": len(ray.nodes()), "startup_s": round(time.monotonic() - t_start, 1)}
     t0 = time.monotonic()  # the fault-free reference: in process (no Ray), bitwise what Ray gives (design 4)
     from fmctd_dist.config import load_config
@@ -142,7 +162,9 @@ def main() -> None:
 
         t = threading.Thread(target=remove_busiest_worker, daemon=True)
         t.start()
+        say("node: evaluate")
         report["node_s"] = round(evaluate("node"), 1)
+        say("node: done")
         t.join(timeout=5)
         report["node"], report["node_killed"] = rows_of("node"), killed
         report["nodes_after"] = len([n for n in ray.nodes() if n["Alive"]])
@@ -165,36 +187,62 @@ def main() -> None:
 
         t = threading.Thread(target=kill_env_then_driver, daemon=True)
         t.start()
+        say("actor: evaluate")
         report["actor_s"] = round(evaluate("actor"), 1)
+        say("actor: done")
         t.join(timeout=5)
         report["actor"], report["actor_killed"] = rows_of("actor"), killed
 
     if "job" in ARGS["scenarios"]:
-        env = {**os.environ, "RAY_ADDRESS": cluster.address, "OMP_NUM_THREADS": "1"}
-        cmd = [sys.executable, "jobs/eval.py", "runner=ray", *ARGS["words"], f"eval.out={OUT}", "eval.run=job"]
+        from ray.job_submission import JobStatus, JobSubmissionClient
+
+        client = JobSubmissionClient(f"http://127.0.0.1:{DASHBOARD_PORT}")
+        # one denoiser and one env actor: the job's own resume is under test here, not the pool
+        words = [w for w in ARGS["words"] if not w.startswith(("ray.denoiser_actors=", "ray.env_actors="))]
+        entry = (f"cd {shlex.quote(str(REPO))} && OMP_NUM_THREADS=1 " + shlex.join(
+            ["python", "jobs/eval.py", "runner=ray", *words, "ray.denoiser_actors=1", "ray.env_actors=1",
+             f"eval.out={OUT}", "eval.run=job"]))
         t0 = time.monotonic()
-        job = subprocess.Popen(cmd, cwd=REPO, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+        def submit() -> str:
+            for _ in range(60):  # the dashboard answers before the head's job agent is up
+                try:
+                    return client.submit_job(entrypoint=entry)
+                except Exception as e:  # noqa: BLE001
+                    if "agent" not in str(e).lower() and "connect" not in str(e).lower():
+                        raise
+                    time.sleep(1)
+            raise RuntimeError("no job agent")
+
+        def wait(jid: str, timeout: float) -> str:
+            deadline = time.monotonic() + timeout
+            while time.monotonic() < deadline:
+                st = client.get_job_status(jid)
+                if st.is_terminal():
+                    return st.value
+                time.sleep(0.2)
+            return "TIMEOUT"
+
+        first_id = submit()
+        say("job: submitted", first_id)
         wait_rows("job", 1, timeout=180)
-        job.send_signal(signal.SIGTERM)  # what `ray job stop` sends the entrypoint first
-        _, err1 = job.communicate(timeout=60)
+        client.stop_job(first_id)  # `ray job stop`: SIGTERM to the entrypoint, SIGKILL after a grace period
+        report["job_stop_status"] = wait(first_id, 60)
         first = rows_of("job")
-        # as after `ray job stop`: the stopped job's actors are gone (their CPUs back) before resubmitting
+        # the stopped job's actors are gone (their CPUs back) before resubmitting
         t_stop, total = time.monotonic(), ray.cluster_resources().get("CPU", 0)
         while ray.available_resources().get("CPU", 0) < total and time.monotonic() - t_stop < 60:
             time.sleep(0.2)
         report["job_freed_s"] = round(time.monotonic() - t_stop, 1)
-        try:
-            again = subprocess.run(cmd, cwd=REPO, env=env, capture_output=True, text=True, timeout=240)
-        except subprocess.TimeoutExpired as e:
-            report.update(job_timeout=True, job_err=str(e.stderr)[-3000:], job_stop_err=err1[-2000:],
-                          job_first=first, res=dict(ray.available_resources()))
-            print("REPORT " + json.dumps(report))
-            raise
+        say("job: stopped", report["job_stop_status"], "freed after", report["job_freed_s"])
+        second_id = submit()
+        say("job: resubmitted", second_id)
+        report["job_status"] = wait(second_id, 240)
+        logs = client.get_job_logs(second_id)
         report["job_s"] = round(time.monotonic() - t0, 1)
         report["job_first"], report["job"] = first, rows_of("job")
-        report["job_rc"], report["job_stop_rc"] = again.returncode, job.returncode
-        report["job_err"] = again.stderr[-2000:] if again.returncode else ""
-        report["job_stdout"] = again.stdout[-1500:]
+        report["job_err"] = logs[-3000:] if report["job_status"] != JobStatus.SUCCEEDED.value else ""
+        report["job_stdout"] = logs[-1500:]
 
     ray.shutdown()
     cluster.shutdown()

@@ -7,8 +7,9 @@ Against a fault-free run of the same grid on the same cluster:
   equal, the lost work counted in ``retries``;
 - an env actor killed mid-episode (and later a planner driver): the episode is re-run and
   recorded once, counted in ``retries``;
-- the job process SIGTERMed mid-run (what `ray job stop` sends), then rerun: nothing lost,
-  nothing duplicated, the first run's rows untouched.
+- jobs/eval.py submitted to the head's job server (`ray job submit`), stopped after its first row
+  (`ray job stop`), then submitted again: nothing lost, nothing duplicated, the stopped job's rows
+  untouched.
 """
 
 from __future__ import annotations
@@ -35,8 +36,11 @@ def run_scenarios(tiny_checkpoint, tmp_path, scenarios) -> dict:
     env = {k: v for k, v in os.environ.items() if not k.startswith("RAY_")}
     env["OMP_NUM_THREADS"] = "1"
     spec = json.dumps({"words": args + SEARCH, "out": str(tmp_path), "scenarios": scenarios})
-    out = subprocess.run([sys.executable, "tests/multinode_faults.py", spec], cwd=REPO_ROOT, env=env,
-                         capture_output=True, text=True, timeout=400)
+    try:
+        out = subprocess.run([sys.executable, "tests/multinode_faults.py", spec], cwd=REPO_ROOT, env=env,
+                             capture_output=True, text=True, timeout=400)
+    except subprocess.TimeoutExpired as e:
+        pytest.fail(f"multinode_faults.py ran over 400 s:\n{str(e.stdout)[-2000:]}\n{str(e.stderr)[-5000:]}")
     lines = [ln for ln in out.stdout.splitlines() if ln.startswith("REPORT ")]
     assert out.returncode == 0 and lines, out.stdout[-3000:] + out.stderr[-5000:]
     report = json.loads(lines[-1][len("REPORT "):])
@@ -83,10 +87,10 @@ def test_env_actor_and_driver_killed_mid_episode(report):
     assert 1 <= sum(r["retries"] for r in report["actor"]) <= 2
 
 
-def test_job_stopped_then_resubmitted_resumes(report):
+def test_ray_job_stopped_then_resubmitted_resumes(report):
     first, final = report["job_first"], report["job"]
-    assert report["job_rc"] == 0, report["job_err"]
-    assert report["job_stop_rc"] != 0, "the first job was meant to be stopped mid-run"
+    assert report["job_stop_status"] == "STOPPED", report
+    assert report["job_status"] == "SUCCEEDED", report["job_err"]
     assert 1 <= len(first) < len(KEYS)
     same_bits(final, report["ref"])
     kept = {r["file"]: r["mtime"] for r in final}
