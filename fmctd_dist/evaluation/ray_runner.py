@@ -10,6 +10,13 @@
 Only the job process writes files and draws progress bars; actors return rows and timings.
 Errors raised on purpose inside actors (FmctdError) reach the user as themselves.
 
+Faults (design §6; tests/test_ray_faults.py, tests/test_ray_multinode.py): a dead denoiser actor's
+micro-batches are re-routed (RayDenoiser); an episode whose EnvActor or PlannerDriver dies (killed,
+out of memory, its node gone) left no row, so it is run again from the start on a new pair, up to
+``ray.max_restarts`` times per episode; both count in the row's ``retries``. Plans are a pure
+function of (config, checkpoint, seed), so every row is the one a fault-free run writes. A stopped
+or killed job keeps the rows it wrote; rerunning it runs only the missing keys.
+
 Python entry point (joins a running cluster, or ``ray.init()`` first yourself)::
 
     import ray
