@@ -48,7 +48,8 @@ def main(argv: list[str]) -> int:
     committed = pq.read_table(lean_path).to_pylist() if lean_path.is_file() else []
     if not root.is_dir() and not committed:
         raise ConfigError(f"report: results={root} does not exist and there is no {lean_path}; "
-                          "run jobs/eval.py first (eval.out=...)")
+                          f"write rows there first with `python jobs/eval.py eval.out={root}`, or point results= "
+                          "at the eval.out dir of an earlier evaluation")
     fresh = load_rows(root) if root.is_dir() else []
     sections: dict[str, str] = {}
     all_rows = []
