@@ -187,12 +187,14 @@ def evaluate(args: argparse.Namespace) -> None:
     row["precision"], row["data_steps"] = p["rows"][0], p["data"]
     row["quality_s"] = time.time() - t0
     run = f"recipe-{args.tag}-{args.name}"
-    grid = merged(words, ["method=fast-mctd", "runner=local", f"tasks=[{args.tasks}]", f"seeds=[{args.seeds}]",
+    method = "fast-mctd" if cfg.jump > 1 else "p-mctd"  # a dense (H=1) arm searches as P-MCTD, the paper's dense twin
+    row["search_method"] = method
+    grid = merged(words, [f"method={method}", "runner=local", f"tasks=[{args.tasks}]", f"seeds=[{args.seeds}]",
                           "eval.threads=1", f"eval.run={run}", f"eval.out={args.results_out}",
                           f"eval.episode_time_limit={args.episode_limit_s}"])
     t0 = time.time()
     subprocess.run([sys.executable, "jobs/eval.py", *grid], cwd=REPO, check=True)
-    files = sorted((REPO / args.results_out / run / "fast-mctd" / cfg.env.name).glob("task=*/seed=*.parquet"))
+    files = sorted((REPO / args.results_out / run / method / cfg.env.name).glob("task=*/seed=*.parquet"))
     rows = [pq.read_table(f, columns=["success", "plan_time_s"]).to_pylist()[0] for f in files]
     row["fast_mctd_success"] = sum(bool(r["success"]) for r in rows)
     row["fast_mctd_episodes"] = len(rows)
