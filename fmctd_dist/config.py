@@ -294,7 +294,8 @@ class RayConfig:
     num_gpus: float = spec(0.0, ge=0, why="GPUs per denoiser actor (needs device=cuda)")
     num_cpus: float = spec(1.0, ge=0, why="CPUs per denoiser actor")
     call_timeout_s: float = spec(300.0, gt=0, why="a micro-batch slower than this is re-routed")
-    max_restarts: int = spec(3, ge=0, why="per denoiser actor; 0 = a dead actor stays dead (its work is re-routed)")
+    max_restarts: int = spec(3, ge=0, why="restarts per denoiser actor, and re-runs per episode whose env actor or "
+                                         "driver died; 0 = neither (a dead actor's micro-batches are still re-routed)")
 
 
 @dataclass

@@ -35,7 +35,7 @@ def test_replanning_every_50_steps():
 
 def test_diffusion_forcing_planner(tiny_checkpoint, one_torch_thread):
     args, ckpt = tiny_checkpoint
-    cfg = load_config(args + ["method=diffusion-forcing", "jump=1"])
+    cfg = load_config(args + ["method=diffusion-forcing"])  # args hold jump=1
     model, manifest = load_checkpoint(ckpt, cfg)
     denoiser = LocalDenoiser(model, cfg.diffusion, "cpu", micro_batch=4)
     planner = make_planner(cfg, denoiser, normaliser_from_manifest(manifest))
