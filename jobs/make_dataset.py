@@ -21,7 +21,7 @@ from fmctd_dist.families import family
 
 def main(argv: list[str]) -> int:
     t0 = time.time()
-    cfg = load_config(argv, method="mctd")
+    cfg = load_config(argv, method="mctd", serves=("cube",))  # cube data exists before cube models do
     if family(cfg.env.name) == "cube":
         return cube_main(cfg, t0)
     path, manifest = make_dataset(cfg)

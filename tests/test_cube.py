@@ -17,7 +17,7 @@ TINY = ["data.episodes=2", "data.episode_steps=121", "env.horizon=100", "env.max
 
 
 def tiny_cfg(root, env="cube-single", *extra):
-    return load_config([f"env={env}", *TINY, f"data.root={root}", *extra], method="mctd")
+    return load_config([f"env={env}", *TINY, f"data.root={root}", *extra], method="mctd", serves=("cube",))
 
 
 @pytest.fixture(scope="module")
@@ -199,7 +199,7 @@ def test_windows_over_cube_xyz(tiny_cube, jump, tokens):
 
 def test_unknown_cube_env_suggests():
     with pytest.raises(ConfigError, match="did you mean 'cube-single'"):
-        load_config(["env=cube-singel"], method="mctd")
+        load_config(["env=cube-singel"], method="mctd", serves=("cube",))
     from fmctd_dist.families import env_spec
 
     with pytest.raises(ConfigError, match="did you mean 'cube-triple'"):
@@ -228,11 +228,32 @@ def test_cube_data_for_a_maze_model(tiny_cube, tmp_path):
 
 
 def test_maze_code_refuses_cube_envs(tiny_cube):
+    """jobs/train.py and jobs/eval.py stop at load_config; the maze code guards its own entries too."""
     from fmctd_dist.data.dataset import load_dataset, make_dataset
     from fmctd_dist.envs import make_env, maze_geometry
 
     cfg, _, _ = tiny_cube
-    for call in (lambda: make_env("cube-single"), lambda: maze_geometry("cube-double"),
+    for call in (lambda: load_config(["env=cube-single"]), lambda: load_config(["env=cube-triple"], method="mctd"),
+                 lambda: make_env("cube-single"), lambda: maze_geometry("cube-double"),
                  lambda: load_dataset(cfg), lambda: make_dataset(cfg)):
         with pytest.raises(ConfigError, match="is a cube env.*not built yet"):
             call()
+
+
+def test_make_dataset_job_smoke(tmp_path):
+    """jobs/make_dataset.py env=cube-single as a subprocess, tiny: it writes the play dataset and says so."""
+    import subprocess
+    import sys
+
+    from fmctd_dist.config import REPO_ROOT
+
+    words = ["env=cube-single", "data.episodes=1", "data.episode_steps=61", "env.horizon=50", "env.max_steps=50",
+             "data.train_window=50", f"data.root={tmp_path}"]
+    out = subprocess.run([sys.executable, "jobs/make_dataset.py", *words], cwd=REPO_ROOT, capture_output=True,
+                         text=True, timeout=300, env={**__import__("os").environ, "OMP_NUM_THREADS": "1"})
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert "generated" in out.stdout and "0% of OGBench's 1000 episodes" in out.stdout
+    assert (tmp_path / "cube-single-play-seed0-1x61" / "manifest.json").is_file()
+    bad = subprocess.run([sys.executable, "jobs/train.py", "env=cube-single"], cwd=REPO_ROOT, capture_output=True,
+                         text=True, timeout=300)
+    assert bad.returncode != 0 and "is a cube env" in bad.stderr + bad.stdout
