@@ -164,8 +164,10 @@ def test_dataset_determinism_and_resume(tiny_cube, tmp_path, monkeypatch):
         make_cube_dataset(cfg, progress=False)
     monkeypatch.setattr(cd, "generate_episode", real)
     assert len(list(cd.parts_dir(cfg).glob("train-*.npz"))) == 1
+    (cd.parts_dir(cfg) / "val-00000.npz").write_bytes(b"not a zip")  # an unreadable part is made again
     _, m2 = make_cube_dataset(cfg, progress=False)
     assert m2["sha256"] == m["sha256"] and m2["stats"]["train"]["episodes_generated_in_last_run"] == 1
+    assert m2["stats"]["val"]["episodes_generated_in_last_run"] == 1
     other = tiny_cfg(tmp_path / "seed1", "cube-single", "data.seed=1")
     assert make_cube_dataset(other, progress=False)[1]["sha256"]["train"] != m["sha256"]["train"]
 

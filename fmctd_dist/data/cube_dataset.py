@@ -33,6 +33,7 @@ import json
 import os
 import shutil
 import time
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterator
@@ -131,6 +132,17 @@ def generate_episode(env, steps: int, noise: float, seeds: tuple[int, int]) -> t
 STATS = ("targets", "placed", "stacked")  # per-episode counters, kept in each episode's part file
 
 
+def _read_part(part: Path) -> dict[str, np.ndarray] | None:
+    """A finished episode's arrays, or None when it is not there or unreadable (it is then made again)."""
+    if not part.is_file():
+        return None
+    try:
+        with np.load(part, allow_pickle=False) as z:
+            return {k: z[k] for k in z.files}
+    except (ValueError, OSError, EOFError, zipfile.BadZipFile):
+        return None
+
+
 def generate_split(cfg: Config, split: str, episodes: int, parts: Path,
                    progress: bool = True) -> tuple[dict[str, np.ndarray], dict]:
     """Episodes 0..episodes-1 of ``split``, stacked to [E, S, ...]; plus quality counters.
@@ -146,10 +158,8 @@ def generate_split(cfg: Config, split: str, episodes: int, parts: Path,
     bar = tqdm(range(episodes), desc=f"{cfg.env.name} {split}", unit="ep", disable=not progress, mininterval=10)
     for ep in bar:
         part = parts / f"{split}-{ep:05d}.npz"
-        if part.is_file():
-            with np.load(part, allow_pickle=False) as z:
-                arrays = {k: z[k] for k in z.files}
-        else:
+        arrays = _read_part(part)
+        if arrays is None:
             env = env or make_cube_env(cfg.env.name, mode="data_collection")
             arrays, c = generate_episode(env, cfg.data.episode_steps, cfg.data.noise,
                                          episode_seeds(cfg.data.seed, split, ep))
