@@ -43,6 +43,7 @@ from tqdm.auto import tqdm
 
 from fmctd_dist.config import Config, resolve_path
 from fmctd_dist.data.dataset import SPLITS, sha256_file, val_episodes
+from fmctd_dist.data.manifest_io import read_manifest_json
 from fmctd_dist.data.npz import save_npz
 from fmctd_dist.data.tokens import Normaliser
 from fmctd_dist.envs.cube import ACT_DIM, cube_columns, make_cube_env, n_cubes, obs_dim, to_obs_units
@@ -252,16 +253,9 @@ def make_cube_dataset(cfg: Config, progress: bool = True) -> tuple[Path, dict[st
 def load_cube_manifest(path: Path, cfg: Config | None = None, verify: bool = True) -> dict[str, Any]:
     """Read and check a cube manifest: env first (another env's data is one clear error), fields, config, sha256."""
     mf = path / "manifest.json"
-    if not mf.is_file():
-        env = cfg.env.name if cfg is not None else "cube-single"
-        raise DatasetError(f"no dataset at {path} (manifest.json missing); create it with "
-                           f"`python jobs/make_dataset.py env={env}`")
-    try:
-        manifest = json.loads(mf.read_text())
-    except json.JSONDecodeError as e:
-        raise DatasetError(f"{mf} is not valid JSON ({e}); delete {path} and regenerate") from None
-    if not isinstance(manifest, dict):
-        raise DatasetError(f"{mf} holds a JSON {type(manifest).__name__}, not an object; delete {path} and regenerate")
+    env = cfg.env.name if cfg is not None else "cube-single"
+    manifest = read_manifest_json(path, f"create it with `python jobs/make_dataset.py env={env}`",
+                                  f"delete {path} and regenerate")
     env = manifest.get("env")
     if cfg is not None and env != cfg.env.name:
         what = f"a {family(env)} dataset (env={env})" if isinstance(env, str) and env in ENV_NAMES \

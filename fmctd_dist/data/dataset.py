@@ -28,6 +28,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from fmctd_dist.config import Config, is_ant, resolve_path
+from fmctd_dist.data.manifest_io import read_manifest_json
 from fmctd_dist.data.npz import load_npz, save_npz
 from fmctd_dist.data.oracle import NoisyOracle
 from fmctd_dist.data.tokens import Normaliser
@@ -253,25 +254,22 @@ def _manifest_type_error(m: dict[str, Any]) -> str:
     return ""
 
 
+def _create_fix(path: Path, cfg: Config | None) -> str:
+    """The command that makes the dataset a loader found missing at ``path``."""
+    if cfg is None:
+        return "create it with `python jobs/make_dataset.py env=<env> data.root=<root>`"
+    from fmctd_dist.hints import dataset_command
+
+    fix = f"create it with `{dataset_command(cfg)}`"
+    if path.resolve() != dataset_dir(cfg).resolve():
+        fix += f" (that writes {dataset_dir(cfg)}; point the loader there)"
+    return fix
+
+
 def load_manifest(path: Path, cfg: Config | None = None, verify: bool = True) -> dict[str, Any]:
     """Read and check a manifest (fields, config agreement, file sha256)."""
     mf = path / "manifest.json"
-    if not mf.is_file():
-        if cfg is None:
-            fix = "create it with `python jobs/make_dataset.py env=<env> data.root=<root>`"
-        else:
-            from fmctd_dist.hints import dataset_command
-
-            fix = f"create it with `{dataset_command(cfg)}`"
-            if path.resolve() != dataset_dir(cfg).resolve():
-                fix += f" (that writes {dataset_dir(cfg)}; point the loader there)"
-        raise DatasetError(f"no dataset at {path} (manifest.json missing); {fix}")
-    try:
-        manifest = json.loads(mf.read_text())
-    except json.JSONDecodeError as e:
-        raise DatasetError(f"{mf} is not valid JSON ({e}); {regenerate_fix(path, cfg)}") from None
-    if not isinstance(manifest, dict):
-        raise DatasetError(f"{mf} holds a JSON {type(manifest).__name__}, not an object; {regenerate_fix(path, cfg)}")
+    manifest = read_manifest_json(path, _create_fix(path, cfg), regenerate_fix(path, cfg))
     if cfg is not None and isinstance(manifest, dict) and manifest.get("env") != cfg.env.name:  # before any field
         raise DatasetError(f"{path} holds data of env={manifest.get('env')!r}, but the config asks for "
                            f"env.name={cfg.env.name}; point the loader at a {cfg.env.name} dataset")

@@ -31,6 +31,7 @@ from tqdm.auto import tqdm
 
 from fmctd_dist.config import REPO_ROOT, Config, resolve_path
 from fmctd_dist.data.dataset import SPLITS, NavigateDataset, load_dataset, sha256_file
+from fmctd_dist.data.manifest_io import read_manifest_json
 from fmctd_dist.data.npz import load_npz, save_npz
 from fmctd_dist.envs.visual_pointmaze import (CAMERA, CAMERA_POS, CAMERA_XYAXES, IMAGE_SIZE, FrameRenderer,
                                               point_env_name)
@@ -169,14 +170,9 @@ def make_frames(cfg: Config, progress: bool = True) -> tuple[Path, dict[str, Any
 def load_manifest(path: Path, cfg: Config, digest: str | None = None) -> dict[str, Any]:
     """Read and check a frames manifest against ``cfg`` (and the dataset's ``digest``) and its file's sha256."""
     mf = path / "manifest.json"
-    if not mf.is_file():
-        raise DatasetError(f"no frames at {path} (manifest.json missing); render them with "
-                           f"`python jobs/render_frames.py env={cfg.env.name}`")
-    try:
-        m = json.loads(mf.read_text())
-    except json.JSONDecodeError as e:
-        raise DatasetError(f"{mf} is not valid JSON ({e}); delete {path} and rerun jobs/render_frames.py") from None
-    missing = [k for k in MANIFEST_FIELDS if not isinstance(m, dict) or k not in m]
+    m = read_manifest_json(path, f"render them with `python jobs/render_frames.py env={cfg.env.name}`",
+                           f"delete {path} and rerun jobs/render_frames.py", what="frames")
+    missing = [k for k in MANIFEST_FIELDS if k not in m]
     if missing:
         raise DatasetError(f"{mf} lacks the field {missing[0]!r}; delete {path} and rerun jobs/render_frames.py")
     want = {"version": FRAMES_VERSION, "env": cfg.env.name, "frames_seed": cfg.visual.frames_seed,
