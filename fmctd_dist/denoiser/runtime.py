@@ -54,19 +54,10 @@ class RuntimeModel(nn.Module):
             out = self.model(x, t, **kw)
         return out.float()
 
-    def num_params(self) -> int:
-        return sum(p.numel() for p in self.model.parameters())
-
 
 def runtime_model(model: nn.Module, precision: str = "fp32", compile: bool = False) -> nn.Module:
     """``model`` (eval mode, no parameter grads) prepared for inference; fp32 eager returns it as is."""
     if precision == "fp32" and not compile:
         return model
     wrapped: nn.Module = RuntimeModel(model, precision)
-    if compile:
-        compiled = torch.compile(wrapped, dynamic=False)
-        for name in ("kind", "token_dim", "n_tokens", "param"):
-            if hasattr(wrapped, name):
-                setattr(compiled, name, getattr(wrapped, name))
-        return compiled
-    return wrapped
+    return torch.compile(wrapped, dynamic=False) if compile else wrapped

@@ -16,7 +16,7 @@ from tqdm.auto import tqdm
 from fmctd_dist.config import Config, git_sha
 from fmctd_dist.device import resolve_device, set_threads
 from fmctd_dist.diffusion.checkpoint import read_manifest, verify_checkpoint
-from fmctd_dist.errors import CheckpointError, ResultsError
+from fmctd_dist.errors import ResultsError
 from fmctd_dist.evaluation.controllers import check_controller, controller_factory
 from fmctd_dist.evaluation.episode import describe, run_episode
 from fmctd_dist.evaluation.identity import config_hash, differences, identity_columns
