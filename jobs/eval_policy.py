@@ -6,17 +6,17 @@
 
 For reach.rows val rows (seeded): restore the ant's MuJoCo state from the row, subgoal = the
 episode's x, y reach.offset steps later, reach.max_steps env steps; reached = within
-reach.radius after a step (fmctd_dist/ant/reach.py). reach.expert=false skips the expert.
+reach.radius after a step (fmctd_dist/control/policy/ant_reach.py). reach.expert=false skips the expert.
 The policy is checked before the data is read: a missing dir, another kind of checkpoint
 or one trained for another maze is one `error:` line.
 """
 
 import time
 
-from fmctd_dist.ant.policy import load_policy
-from fmctd_dist.ant.policy_config import load_policy_args, policy_dir
-from fmctd_dist.ant.policy_data import load_policy_data
-from fmctd_dist.ant.reach import evaluate_reach, expert_controller, zero_controller, format_reach
+from fmctd_dist.control.policy.ant import load_policy
+from fmctd_dist.control.policy.config import load_policy_args, policy_dir
+from fmctd_dist.control.policy.ant_data import load_policy_data
+from fmctd_dist.control.policy.ant_reach import evaluate_reach, expert_controller, zero_controller, format_reach
 from fmctd_dist.cli import run
 from fmctd_dist.config import resolve_path
 from fmctd_dist.device import set_threads

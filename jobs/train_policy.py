@@ -6,9 +6,9 @@
 The dataset is the one `jobs/make_dataset.py` writes for the same env= / data.* words
 (manifest, sha256 and expert verified). Input: the ant state without x, y + the subgoal
 relative to the ant; output: 8 torques; MSE onto the data's noisy expert torques, subgoals
-relabelled in hindsight (fmctd_dist/ant/policy_data.py). The progress bar shows the train
+relabelled in hindsight (fmctd_dist/control/policy/ant_data.py). The progress bar shows the train
 loss, the last val loss and steps/s; the end prints the val loss beside the expert's (the
-noise floor) and the reach rates (fmctd_dist/ant/reach.py) of the policy and the expert.
+noise floor) and the reach rates (fmctd_dist/control/policy/ant_reach.py) of the policy and the expert.
 
 A killed run continues from its last checkpoint (policy.ckpt_every) when rerun with the same
 command; raising policy.max_steps continues a finished one. policy.threads=1 by default.
@@ -16,9 +16,9 @@ command; raising policy.max_steps continues a finished one. policy.threads=1 by 
 
 import time
 
-from fmctd_dist.ant.policy_config import load_policy_args, policy_dir
-from fmctd_dist.ant.policy_train import train_policy
-from fmctd_dist.ant.reach import format_reach
+from fmctd_dist.control.policy.config import load_policy_args, policy_dir
+from fmctd_dist.control.policy.train import train_policy
+from fmctd_dist.control.policy.ant_reach import format_reach
 from fmctd_dist.cli import run
 
 

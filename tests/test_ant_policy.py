@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 import torch
 
-from fmctd_dist.ant.policy import MODEL_FILE, NAME, load_policy, policy_input
-from fmctd_dist.ant.policy_config import load_policy_args
-from fmctd_dist.ant.policy_data import make_rows, run_ends, sample_offsets, sample_pairs
-from fmctd_dist.ant.policy_train import train_policy
+from fmctd_dist.control.policy.ant import MODEL_FILE, NAME, load_policy, policy_input
+from fmctd_dist.control.policy.config import load_policy_args
+from fmctd_dist.control.policy.ant_data import make_rows, run_ends, sample_offsets, sample_pairs
+from fmctd_dist.control.policy.train import train_policy
 from fmctd_dist.config import REPO_ROOT
 from fmctd_dist.control.ant_controller import AntPlanController, run_plan
 from fmctd_dist.diffusion.checkpoint import load_train_state
@@ -229,8 +229,8 @@ def test_restored_rows_replay_the_dataset(data_root):
 
 def test_reach_is_deterministic_and_the_expert_beats_zero_torques(data_root):
     from fmctd_dist.ant.expert import load_expert
-    from fmctd_dist.ant.policy_data import load_policy_data
-    from fmctd_dist.ant.reach import evaluate_reach, expert_controller, zero_controller
+    from fmctd_dist.control.policy.ant_data import load_policy_data
+    from fmctd_dist.control.policy.ant_reach import evaluate_reach, expert_controller, zero_controller
 
     cfg, _ = tiny(data_root, 1)
     _, val, _ = load_policy_data(cfg, drop_fallen=True)

@@ -10,7 +10,7 @@ relative subgoal's norm is clipped at ``max_subgoal_dist`` so a far subgoal (a s
 plan that jumps) reads as "that way, far" instead of an input never seen in training.
 
 Trained by MSE onto the dataset's noisy expert torques (their mean is the expert's), with
-subgoals relabelled in hindsight (:mod:`fmctd_dist.ant.policy_data`); deterministic.
+subgoals relabelled in hindsight (:mod:`fmctd_dist.control.policy.ant_data`); deterministic.
 Checkpoints follow the expert's: ``model.pt`` (state_dict, input normalisation included)
 + ``manifest.json`` (config, dataset and expert digests, git sha, metrics, sha256), loaded
 with ``torch.load(weights_only=True)``; anything wrong is one :class:`CheckpointError`.
@@ -154,7 +154,7 @@ class AntPolicy:
 
 def load_policy(ckpt_dir: str | Path, env_name: str | None = None, obs_dim: int = OBS_DIM) -> AntPolicy:
     """Verify and load a policy. ``env_name``: the maze it will drive; ``obs_dim``: what the caller feeds."""
-    from fmctd_dist.ant.policy_config import policy_config_from_dict  # deferred: omegaconf
+    from fmctd_dist.control.policy.config import policy_config_from_dict  # deferred: omegaconf
 
     ckpt_dir = Path(ckpt_dir)
     manifest = read_policy_manifest(ckpt_dir, env_name)

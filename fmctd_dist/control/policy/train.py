@@ -7,7 +7,7 @@ fixed set of ``val_rows`` val pairs is logged beside the *expert's* MSE on the s
 Every ``ckpt_every`` steps it writes model.pt + manifest.json and train_state.pt (network,
 optimiser, batch RNG, history); rerunning continues from there and is bitwise the
 uninterrupted run (same thread count). At the end, with ``reach.rows > 0``, the reach
-rate of the policy and of the expert (:mod:`fmctd_dist.ant.reach`) go into the manifest.
+rate of the policy and of the expert (:mod:`fmctd_dist.control.policy.ant_reach`) go into the manifest.
 """
 
 from __future__ import annotations
@@ -20,10 +20,10 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from fmctd_dist.ant.policy import MANIFEST_FILE, NAME, GoalPolicyNet, build_net, policy_input, \
+from fmctd_dist.control.policy.ant import MANIFEST_FILE, NAME, GoalPolicyNet, build_net, policy_input, \
     read_policy_manifest, save_policy
-from fmctd_dist.ant.policy_config import PolicyConfig, policy_dir
-from fmctd_dist.ant.policy_data import PolicyRows, load_policy_data, sample_pairs
+from fmctd_dist.control.policy.config import PolicyConfig, policy_dir
+from fmctd_dist.control.policy.ant_data import PolicyRows, load_policy_data, sample_pairs
 from fmctd_dist.data.dataset import dataset_dir
 from fmctd_dist.config import Config, git_sha, resolve_path
 from fmctd_dist.device import set_threads
@@ -202,7 +202,7 @@ def train_policy(cfg: Config, pcfg: PolicyConfig, out_dir: str | Path | None = N
 def run_reach(cfg: Config, pcfg: PolicyConfig, net: GoalPolicyNet, val_rows: PolicyRows) -> dict[str, Any]:
     """Reach rate of this network (and of the expert when reach.expert) on val rows."""
     from fmctd_dist.ant.expert import load_expert
-    from fmctd_dist.ant.reach import evaluate_reach, expert_controller, zero_controller
+    from fmctd_dist.control.policy.ant_reach import evaluate_reach, expert_controller, zero_controller
 
     max_dist = pcfg.policy.max_subgoal_dist
 

@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from fmctd_dist.ant.policy_data import PolicyRows
+from fmctd_dist.control.policy.ant_data import PolicyRows
 from fmctd_dist.device import torch_threads
 from fmctd_dist.envs.antmaze import ACT_DIM, AntMaze, healthy, upright
 
