@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from fmctd_dist.envs import make_env, maze_geometry
-from fmctd_dist.envs.pointmaze import check_seed
+from fmctd_dist.envs.seeding import check_seed
 from fmctd_dist.errors import ConfigError
 
 # reference.md §9: (init_xy, goal_xy, BFS cell distance) per task

@@ -10,7 +10,8 @@ on each success, the episode runs on), and
 Rows keep the full 29-D observation before each step (what a low-level policy will need);
 the planner trains on its x, y. A dataset is only as reproducible as the policy behind it,
 so the manifest records the expert's sha256 and loading refuses data made by another
-expert. The layout, per-episode seeding and verification are :mod:`fmctd_dist.data.dataset`'s.
+expert. The layout and verification are :mod:`fmctd_dist.data.dataset`'s, the start / goal draws
+and per-episode seeding :mod:`fmctd_dist.data.navigate_episodes`'s.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ import numpy as np
 
 from fmctd_dist.ant.direction_env import expert_input
 from fmctd_dist.config import Config, resolve_path
-from fmctd_dist.data.dataset import random_goal, random_start, run_episodes
+from fmctd_dist.data.navigate_episodes import random_goal, random_start, run_episodes
 from fmctd_dist.data.oracle import NoisyOracle
 from fmctd_dist.envs.antmaze import ACT_DIM, GOAL_TOLERANCE, HEALTHY_Z, OBS_DIM, AntMaze, healthy, upright
 from fmctd_dist.errors import DatasetError

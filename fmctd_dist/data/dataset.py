@@ -5,41 +5,38 @@ Same config -> same bytes (per-episode seeds, deterministic npz). Loading verifi
 manifest field and sha256; a corrupt or mismatched file raises DatasetError and is never
 silently regenerated over.
 
-PointMaze data comes from the noisy BFS oracle (here); AntMaze data from the ant expert
-steered by the same oracle (:mod:`fmctd_dist.data.ant_dataset`). Both share the goal
-logic, the per-episode seeding, the layout and the manifest; loading gives the planner
-x, y observations [E, S, 2] for either.
+PointMaze data comes from the noisy BFS oracle (:mod:`fmctd_dist.data.point_dataset`);
+AntMaze data from the ant expert steered by the same oracle (:mod:`fmctd_dist.data.ant_dataset`).
+Both share the goal logic and per-episode seeding (:mod:`fmctd_dist.data.navigate_episodes`,
+below both) and the layout and manifest (here, above both); loading gives the planner x, y
+observations [E, S, 2] for either.
 """
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 import shlex
 import shutil
 import time
-from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
-from tqdm.auto import tqdm
 
 from fmctd_dist.config import Config, is_ant, resolve_path
-from fmctd_dist.data.manifest_io import read_manifest_json
+from fmctd_dist.data.ant_dataset import ANT_GENERATOR_VERSION, AntSource, check_expert_matches
+from fmctd_dist.data.manifest_io import read_manifest_json, sha256_file
 from fmctd_dist.data.npz import load_npz, save_npz
-from fmctd_dist.data.oracle import NoisyOracle
+from fmctd_dist.data.point_dataset import POINT_GENERATOR_VERSION, PointSource
+from fmctd_dist.data.splits import SPLITS, val_episodes
 from fmctd_dist.data.tokens import Normaliser
-from fmctd_dist.envs import make_env
-from fmctd_dist.envs.maze import MazeGeometry
-from fmctd_dist.envs.pointmaze import NOISE, GOAL_TOLERANCE, PointMaze
 from fmctd_dist.errors import DatasetError
 from fmctd_dist.families import MAZE_FAMILIES, require_family
 
-GENERATOR_VERSION = 1
-SPLITS = {"train": 0, "val": 1}  # split id feeds the per-episode seed
+__all__ = ["SPLITS", "sha256_file", "val_episodes", "dataset_dir", "make_dataset", "load_manifest", "load_dataset",
+           "NavigateDataset", "regenerate_fix"]  # SPLITS, sha256_file: re-exported for data/visual_frames.py
 MANIFEST_FIELDS = ("generator_version", "env", "seed", "noise", "episode_steps", "episodes",
                    "sha256", "obs_mean", "obs_std")
 
@@ -47,82 +44,6 @@ MANIFEST_FIELDS = ("generator_version", "env", "seed", "noise", "episode_steps",
 def dataset_dir(cfg: Config) -> Path:
     d = cfg.data
     return resolve_path(d.root) / f"{cfg.env.name}-navigate-seed{d.seed}-{d.episodes}x{d.episode_steps}"
-
-
-def val_episodes(cfg: Config) -> int:
-    return max(1, round(cfg.data.episodes * cfg.data.val_fraction))
-
-
-def sha256_file(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
-
-
-def random_start(geo: MazeGeometry, rng: np.random.Generator) -> np.ndarray:
-    """[2] a uniformly drawn free cell's centre + uniform [-1, 1] noise (OGBench navigate's start)."""
-    free = geo.free_cells()
-    return geo.cell_to_xy(free[rng.integers(len(free))]) + rng.uniform(-NOISE, NOISE, size=2)
-
-
-def random_goal(geo: MazeGeometry, rng: np.random.Generator) -> np.ndarray:
-    """[2] a uniformly drawn vertex cell's centre (OGBench navigate's goal set, no goal noise here)."""
-    vertices = geo.vertex_cells()
-    return geo.cell_to_xy(vertices[rng.integers(len(vertices))])
-
-
-def generate_episode(env: PointMaze, oracle: NoisyOracle, steps: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
-    """One navigate episode: random start cell, random vertex goal, a new goal on each success."""
-    geo: MazeGeometry = env.geometry
-    start = random_start(geo, rng)
-    goal = random_goal(geo, rng)
-    env.set_position(start)
-    pos = env.position()
-    obs = np.empty((steps, 2), np.float32)
-    act = np.empty((steps, 2), np.float32)
-    goals = np.empty((steps, 2), np.float32)
-    for t in range(steps):
-        a = oracle.act(pos, goal, rng)
-        obs[t], act[t], goals[t] = pos, a, goal
-        env.goal = goal
-        pos, success = env.step(a)
-        if success:
-            goal = random_goal(geo, rng)
-    return {"observations": obs, "actions": act, "goals": goals}
-
-
-def episode_rng(cfg: Config, split: str, ep: int) -> np.random.Generator:
-    """Episode ``ep`` of ``split`` draws only from its own stream: any episode can be regenerated alone."""
-    return np.random.default_rng(np.random.SeedSequence([cfg.data.seed, SPLITS[split], ep]))
-
-
-Episode = Callable[[np.random.Generator], dict[str, np.ndarray]]
-
-
-def run_episodes(cfg: Config, split: str, episodes: int, episode: Episode,
-                 progress: bool = True) -> dict[str, np.ndarray]:
-    """Call ``episode(rng)`` (-> arrays [S, ...]) per episode; stack to [E, S, ...] and add ``terminals``."""
-    out: dict[str, list[np.ndarray]] = {}
-    for ep in tqdm(range(episodes), desc=f"{cfg.env.name} {split}", unit="ep", disable=not progress):
-        for k, v in episode(episode_rng(cfg, split, ep)).items():
-            out.setdefault(k, []).append(v)
-    arrays = {k: np.stack(v) for k, v in out.items()}
-    terminals = np.zeros(arrays["observations"].shape[:2], dtype=bool)
-    terminals[:, -1] = True
-    arrays["terminals"] = terminals
-    return arrays
-
-
-def generate_split(cfg: Config, split: str, episodes: int, progress: bool = True) -> dict[str, np.ndarray]:
-    env = make_env(cfg.env.name)
-    env.reset(1, cfg.data.seed)  # initialise MuJoCo state; positions are then set per episode
-    oracle = NoisyOracle(env.geometry, cfg.data.noise)
-    arrays = run_episodes(cfg, split, episodes,
-                          lambda rng: generate_episode(env, oracle, cfg.data.episode_steps, rng), progress)
-    env.close()
-    return arrays
 
 
 class DataSource(Protocol):
@@ -139,38 +60,15 @@ class DataSource(Protocol):
         ...
 
 
-class PointSource:
-    """PointMaze data: the noisy BFS oracle's own actions (OGBench's pointmaze navigate recipe)."""
-
-    version = GENERATOR_VERSION
-
-    def __init__(self, cfg: Config):
-        self.cfg = cfg
-
-    def generate(self, split: str, episodes: int, progress: bool) -> dict[str, np.ndarray]:
-        return generate_split(self.cfg, split, episodes, progress)
-
-    def manifest_fields(self) -> dict[str, Any]:
-        return {"oracle": "BFS next-cell direction + N(0, noise^2), clipped; new vertex-cell goal on success "
-                          f"(within {GOAL_TOLERANCE})",
-                "keys": ["observations", "actions", "goals", "terminals"]}
-
-
 def data_source(cfg: Config) -> DataSource:
     """The generator for ``cfg.env``: the point oracle, or the ant expert (which loads and checks its weights)."""
     if is_ant(cfg.env.name):
-        from fmctd_dist.data.ant_dataset import AntSource  # deferred: it imports this module
-
         return AntSource(cfg)
     return PointSource(cfg)
 
 
 def generator_version(env: str) -> int:
-    if is_ant(env):
-        from fmctd_dist.data.ant_dataset import ANT_GENERATOR_VERSION
-
-        return ANT_GENERATOR_VERSION
-    return GENERATOR_VERSION
+    return ANT_GENERATOR_VERSION if is_ant(env) else POINT_GENERATOR_VERSION
 
 
 def make_dataset(cfg: Config, progress: bool = True) -> tuple[Path, dict[str, Any]]:
@@ -293,8 +191,6 @@ def load_manifest(path: Path, cfg: Config | None = None, verify: bool = True) ->
                 raise DatasetError(f"{mf}: {key}={manifest[key]!r} but the config asks for {want!r}; "
                                    f"{regenerate_fix(path, cfg)}, or fix data.{key if key != 'env' else 'env.name'}")
         if is_ant(cfg.env.name):
-            from fmctd_dist.data.ant_dataset import check_expert_matches
-
             check_expert_matches(manifest, cfg, path)
     if verify:
         for split, digest in manifest["sha256"].items():

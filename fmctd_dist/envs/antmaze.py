@@ -1,7 +1,8 @@
 """AntMaze episodes over OGBench's MuJoCo ant maze, with the same start/goal protocols as PointMaze.
 
-Same surface as :class:`~fmctd_dist.envs.pointmaze.PointMaze` (``reset(task_id, seed)``,
-``step``, ``position``, ``geometry``), but the observation is the full 29-D ant state
+Same surface as :class:`~fmctd_dist.envs.pointmaze.PointMaze` (both subclass
+:class:`~fmctd_dist.envs.maze_episodes.OGBenchMaze`: ``reset(task_id, seed)``, ``step``,
+``position``, ``geometry``), but the observation is the full 29-D ant state
 (qpos 15 + qvel 14, x and y first) and an action is 8 joint torques in [-1, 1].
 
 Success is OGBench's ant rule (``compute_success``, ``success_timing='post'``): the torso's
@@ -14,7 +15,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from fmctd_dist.envs.pointmaze import OGBenchMaze, Reset, check_seed
+from fmctd_dist.envs.maze_episodes import OGBenchMaze, Reset
+from fmctd_dist.envs.seeding import check_seed
 
 GOAL_TOLERANCE = 0.5  # OGBench ant/humanoid success radius (point: 1.0)
 OBS_DIM = 29  # qpos (x, y, z, quaternion 4, 8 joints) + qvel (14)

@@ -1,6 +1,6 @@
 """Robot-arm cube episodes over OGBench's MuJoCo ``CubeEnv`` (``cube-{single,double,triple}-v0``), offline.
 
-We build OGBench's env class directly (as ``envs/pointmaze.py`` does for the maze), so nothing
+We build OGBench's env class directly (as ``envs/maze.py`` does for the maze), so nothing
 is downloaded. ``permute_blocks=True`` and success as in ``cube-*-v0``; ``terminate_at_goal``
 is off (an episode runs its ``env.max_steps``; success is reported on every step).
 
@@ -28,6 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fmctd_dist.envs.seeding import check_seed
 from fmctd_dist.errors import ConfigError
 from fmctd_dist.families import env_spec, require_family
 
@@ -126,10 +127,9 @@ class CubeEpisodes:
 
     def reset(self, task_id: int, seed: int) -> CubeReset:
         self.task_start_goal(task_id)  # checks task_id
-        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-            raise ConfigError(f"seed={seed!r} must be a non-negative integer (e.g. seed=0)")
-        self._env.action_space.seed(int(seed))  # OGBench's 2 settling actions at the goal
-        ob, info = self._env.reset(seed=int(seed), options=dict(task_id=task_id))
+        seed = check_seed(seed)
+        self._env.action_space.seed(seed)  # OGBench's 2 settling actions at the goal
+        ob, info = self._env.reset(seed=seed, options=dict(task_id=task_id))
         u = self._env
         self.goal = to_obs_units(u._data.mocap_pos[u._cube_target_mocap_ids]).reshape(-1)
         return CubeReset(ob.astype(np.float64), self.goal.copy(), np.asarray(info["goal"], dtype=np.float64))

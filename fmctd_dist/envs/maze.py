@@ -7,6 +7,7 @@ plots can use it without MuJoCo stepping.
 
 from __future__ import annotations
 
+import os
 from collections import deque
 from dataclasses import dataclass, field
 from functools import lru_cache
@@ -21,6 +22,17 @@ MAZE_UNIT = 4.0
 OFFSET = 4.0  # OGBench: cell (i, j) centre = (4j - 4, 4i - 4)
 UNREACHABLE = -1
 NEIGHBOURS = ((-1, 0), (0, -1), (1, 0), (0, 1))  # OGBench's BFS order
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+
+def make_navigate_env(name: str):
+    """OGBench's ``<name>-navigate-v0`` env only (no dataset download), goal not terminating, no goal noise."""
+    import ogbench  # deferred: MuJoCo start-up is not free
+
+    return ogbench.make_env_and_datasets(
+        f"{name}-navigate-v0", env_only=True, terminate_at_goal=False, add_noise_to_goal=False
+    )
 
 
 @dataclass(frozen=True)
@@ -122,9 +134,7 @@ def check_env_name(name: str) -> str:
 @lru_cache(maxsize=None)
 def maze_geometry(name: str) -> MazeGeometry:
     """Geometry of ``{pointmaze,antmaze}-{medium,large,giant}`` read from OGBench's env definition."""
-    from fmctd_dist.envs.pointmaze import _make_ogbench_env
-
-    env = _make_ogbench_env(check_env_name(name))
+    env = make_navigate_env(check_env_name(name))
     u = env.unwrapped
     tasks = tuple(
         Task(k + 1, tuple(t["init_ij"]), tuple(t["goal_ij"]),
