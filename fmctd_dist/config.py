@@ -23,7 +23,7 @@ from omegaconf.errors import OmegaConfBaseException
 
 from fmctd_dist.errors import ConfigError, did_you_mean, unknown_name
 from fmctd_dist.families import ANT_ENVS, CUBE_ENVS, ENV_NAMES, MAZES, POINT_ENVS  # noqa: F401 - re-exported
-from fmctd_dist.families import PENDING_FAMILIES, family, require_family
+from fmctd_dist.families import PENDING_FAMILIES, family, require_family, state_dim
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 CONFIG_DIR = REPO_ROOT / "configs"
@@ -346,8 +346,13 @@ class Config:
         return self.plan_tokens + 1
 
     @property
+    def frame_dim(self) -> int:
+        """Numbers per plan frame: the env family's planner state (maze x, y: 2; cube xyz: 3 per cube)."""
+        return state_dim(self.env.name)
+
+    @property
     def token_dim(self) -> int:
-        return 2 * self.model.frame_stack
+        return self.frame_dim * self.model.frame_stack
 
     @property
     def run_name(self) -> str:

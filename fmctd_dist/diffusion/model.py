@@ -38,7 +38,7 @@ from fmctd_dist.errors import unknown_name
 MODEL_KINDS = ("df",)
 MODEL_PARAMS = ("x0", "v", "v_offset")
 MODEL_NORMS = ("post", "pre")
-FRAME_DIM = 2  # numbers per stacked frame (x, y): a token is frame_stack frames of FRAME_DIM
+FRAME_DIM = 2  # the mazes' numbers per frame (x, y); a token is frame_stack frames of frame_dim numbers
 
 
 class SinusoidalEmbedding(nn.Module):
@@ -100,21 +100,23 @@ class EncoderBlock(nn.Module):
 class DFTransformer(nn.Module):
     """x0-predictor f(x_t, t) -> x0_hat for token sequences with per-token timesteps.
 
-    x: [B, T, D] float (D = 2 * frame_stack), t: [B, T] long in [0, timesteps) -> [B, T, D].
+    x: [B, T, D] float (D = frame_dim * frame_stack: the env family's planner state per frame, 2 for
+    a maze's x, y, 3 per cube), t: [B, T] long in [0, timesteps) -> [B, T, D].
     ``alphas_cumprod`` [timesteps] (the training schedule) is needed by param v / v_offset only;
     it is a non-persistent buffer, so state_dicts are the same for every ``param``.
     """
 
     def __init__(self, token_dim: int, n_tokens: int, width: int = 128, layers: int = 12,
                  heads: int = 4, ff: int = 512, kind: str = "df", param: str = "x0", norm: str = "post",
-                 alphas_cumprod: np.ndarray | None = None):
+                 alphas_cumprod: np.ndarray | None = None, frame_dim: int = FRAME_DIM):
         super().__init__()
         if param not in MODEL_PARAMS:
             raise unknown_name("model.param", param, MODEL_PARAMS)
         if norm not in MODEL_NORMS:
             raise unknown_name("model.norm", norm, MODEL_NORMS)
-        assert token_dim % FRAME_DIM == 0, f"token_dim {token_dim} is not a multiple of {FRAME_DIM}"
+        assert token_dim % frame_dim == 0, f"token_dim {token_dim} is not a multiple of frame_dim {frame_dim}"
         self.kind = kind
+        self.frame_dim = frame_dim  # numbers per frame: v_offset's token mean is taken per frame coordinate
         self.param, self.norm = param, norm
         self.token_dim = token_dim
         self.n_tokens = n_tokens  # the sequence length it is trained for (recorded in manifests)
@@ -134,14 +136,15 @@ class DFTransformer(nn.Module):
 
     @classmethod
     def from_config(cls, model_cfg: ModelConfig, n_tokens: int,
-                    diffusion_cfg: DiffusionConfig | None = None) -> "DFTransformer":
-        """Build from ``cfg.model`` (and ``cfg.diffusion``'s schedule for param v / v_offset)."""
+                    diffusion_cfg: DiffusionConfig | None = None, frame_dim: int = FRAME_DIM) -> "DFTransformer":
+        """Build from ``cfg.model`` (and ``cfg.diffusion``'s schedule for param v / v_offset);
+        ``frame_dim`` is the env family's state size per frame (``Config.frame_dim``)."""
         if model_cfg.kind not in MODEL_KINDS:
             raise unknown_name("model.kind", model_cfg.kind, MODEL_KINDS)
         dc = diffusion_cfg or DiffusionConfig()
         ab = alphas_cumprod(make_betas(dc.beta_schedule, dc.timesteps, dc.beta_start, dc.beta_end))
-        return cls(2 * model_cfg.frame_stack, n_tokens, model_cfg.width, model_cfg.layers,
-                   model_cfg.heads, model_cfg.ff, model_cfg.kind, model_cfg.param, model_cfg.norm, ab)
+        return cls(frame_dim * model_cfg.frame_stack, n_tokens, model_cfg.width, model_cfg.layers,
+                   model_cfg.heads, model_cfg.ff, model_cfg.kind, model_cfg.param, model_cfg.norm, ab, frame_dim)
 
     def forward(self, x: torch.Tensor, t: torch.Tensor, skip_grad: bool = True) -> torch.Tensor:
         """x0_hat [B, T, D]. ``skip_grad=False`` detaches v's skip path (guidance through the network only)."""
@@ -162,7 +165,7 @@ class DFTransformer(nn.Module):
         if self.param == "x0":
             return torch.zeros_like(x)
         sx = self.sqrt_ab[t][..., None] * x
-        return sx if self.param == "v" else token_offset(sx)
+        return sx if self.param == "v" else token_offset(sx, self.frame_dim)
 
     def branch(self, out: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
         """The network's part of x0_hat, from its raw output [B, T, D]: v's -sqrt(1-ab) F; for
@@ -170,14 +173,14 @@ class DFTransformer(nn.Module):
         if self.param == "x0":
             return out
         v = -self.sqrt_1m_ab[t][..., None] * out
-        return v if self.param == "v" else token_offset(v) + out - token_offset(out)
+        return v if self.param == "v" else token_offset(v, self.frame_dim) + out - token_offset(out, self.frame_dim)
 
     def num_params(self) -> int:
         return sum(p.numel() for p in self.parameters())
 
 
-def token_offset(z: torch.Tensor) -> torch.Tensor:
+def token_offset(z: torch.Tensor, frame_dim: int = FRAME_DIM) -> torch.Tensor:
     """[B, T, D] -> [B, T, D]: every frame of a token replaced by the token's mean frame (its offset)."""
     b, t, d = z.shape
-    frames = z.reshape(b, t, d // FRAME_DIM, FRAME_DIM)
+    frames = z.reshape(b, t, d // frame_dim, frame_dim)
     return frames.mean(dim=2, keepdim=True).expand_as(frames).reshape(b, t, d)

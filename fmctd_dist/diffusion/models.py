@@ -23,15 +23,18 @@ def build_model(model_cfg: ModelConfig, n_tokens: int, token_dim: int | None = N
                 diffusion_cfg: DiffusionConfig | None = None) -> nn.Module:
     """An untrained model for ``cfg.model`` and a sequence of ``n_tokens`` tokens.
 
-    token_dim defaults to 2 * frame_stack (one (x, y) per stacked frame); ``diffusion_cfg``
+    token_dim defaults to 2 * frame_stack (one maze (x, y) per stacked frame; other families pass
+    ``Config.token_dim``, and a frame is token_dim / frame_stack numbers); ``diffusion_cfg``
     (default: the paper's) gives the schedule that model.param v / v_offset read alphabar from.
     """
     dim = 2 * model_cfg.frame_stack if token_dim is None else token_dim
+    if dim % model_cfg.frame_stack:
+        raise ValueError(f"token_dim {dim} is not a multiple of model.frame_stack={model_cfg.frame_stack}")
     if model_cfg.kind == "df":
         dc = diffusion_cfg or DiffusionConfig()
         ab = alphas_cumprod(make_betas(dc.beta_schedule, dc.timesteps, dc.beta_start, dc.beta_end))
         return DFTransformer(dim, n_tokens, model_cfg.width, model_cfg.layers, model_cfg.heads, model_cfg.ff,
-                             model_cfg.kind, model_cfg.param, model_cfg.norm, ab)
+                             model_cfg.kind, model_cfg.param, model_cfg.norm, ab, dim // model_cfg.frame_stack)
     if model_cfg.kind == "diffuser":
         return TemporalUnet(dim, n_tokens, list(model_cfg.unet_channels), model_cfg.unet_kernel, model_cfg.kind,
                             model_cfg.unet_padding, model_cfg.unet_edge_frames)

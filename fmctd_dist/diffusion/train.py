@@ -202,7 +202,7 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
 
     with torch.random.fork_rng(devices=[]):  # seeded init without touching the caller's global RNG
         torch.manual_seed(tc.seed)
-        model = build_model(cfg.model, cfg.n_tokens, diffusion_cfg=cfg.diffusion).to(device)
+        model = build_model(cfg.model, cfg.n_tokens, cfg.token_dim, diffusion_cfg=cfg.diffusion).to(device)
     opt = torch.optim.AdamW(model.parameters(), lr=tc.lr, betas=(0.9, 0.999), weight_decay=tc.weight_decay)
     loss_fn = make_loss(cfg, device)
     rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence([tc.seed, data.seed])))
