@@ -4,6 +4,7 @@
     python jobs/bench_denoiser.py checkpoints/pointmaze-medium-h5  # one
     python jobs/bench_denoiser.py --throughput options=fp32,bf16,compiled,bf16+compiled   # speed per option
     python jobs/bench_denoiser.py --precision checkpoints/pointmaze-medium-h1   # why plans warp
+    python jobs/bench_denoiser.py --cube checkpoints/cube-single-h5   # cube models (also picked out of the default list)
 
 Quality, per checkpoint: validation loss (manifest), then 100 unguided and 100 guided plans
 (20 per task start, full pyramid schedule = plain Diffusion Forcing sampling; Diffuser
@@ -11,7 +12,9 @@ checkpoints: all tokens denoised together, start inpainted): share of plans
 without a warp (a step over 0.75 + 0.25 H: the authors' 1.0 dense, 2.0 at H=5), share of plan points inside free
 maze cells, share of guided plans that come within 2.0 of the goal. These say whether a
 search has anything to work with (the measurements live in fmctd_dist.evaluation.plan_quality,
-shared with jobs/bench_recipe.py). Throughput: guided DDIM transitions per second.
+shared with jobs/bench_recipe.py). Cube models get their own table
+(fmctd_dist.evaluation.cube_quality: unguided plans from 100 validation starts beside the data's
+own windows). Throughput: guided DDIM transitions per second.
 """
 
 from __future__ import annotations
@@ -26,6 +29,7 @@ import torch
 from fmctd_dist.config import REPO_ROOT
 from fmctd_dist.diffusion.model import DFTransformer
 from fmctd_dist.evaluation.plan_quality import plan_quality, precision
+from fmctd_dist.families import family
 
 
 def precision_lines(ckpt: Path, batch: int = 64, timesteps: tuple[int, ...] = ()) -> list[str]:
@@ -47,6 +51,24 @@ def precision_lines(ckpt: Path, batch: int = 64, timesteps: tuple[int, ...] = ()
 
 OPTIONS = {"fp32": ("fp32", False), "bf16": ("bf16", False), "compiled": ("fp32", True),
            "bf16+compiled": ("bf16", True)}  # name -> (diffusion.precision, diffusion.compile)
+
+
+def cube_lines(ckpts: list[Path]) -> list[str]:
+    """The cube quality table (fmctd_dist.evaluation.cube_quality) as markdown: model plans, then the data's."""
+    from fmctd_dist.evaluation.cube_quality import cube_plan_quality
+
+    lines = ["| checkpoint | steps | val loss | train h | warp | plans of | no warp | cubes supported at the end | "
+             "at most one cube moved | some cube moved | boundary / inside step | largest step |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for ckpt in ckpts:
+        r = cube_plan_quality(ckpt)
+        for who in ("model", "data"):
+            q = r[who]
+            lines.append(f"| {r['checkpoint']} | {r['steps']} | {r['val_loss']:.4f} | {r['train_h']:.2f} | {r['warp']:.2f} | "
+                         f"{who} | {100 * q['no_warp']:.0f}% | {100 * q['supported_end']:.0f}% | "
+                         f"{100 * q['one_mover']:.0f}% | {100 * q['moved']:.0f}% | "
+                         f"{q['boundary_step']:.3f} / {q['inside_step']:.3f} | {q['max_step']:.2f} |")
+    return lines
 
 
 def peak_flops(dtype: torch.dtype, device: str = "cpu", n: int = 2048, reps: int = 5) -> float:
@@ -142,9 +164,16 @@ def main(argv: list[str]) -> None:
         for a in argv[1:]:
             print("\n".join(precision_lines(Path(a))) + "\n")
         return
+    if argv and argv[0] == "--cube":
+        print("\n".join(cube_lines([Path(a) for a in argv[1:]])))
+        return
     # every shipped planning model (DF or Diffuser); other checkpoints (the ant expert) have no model_kind
     ckpts = [Path(a) for a in argv] or sorted(p.parent for p in (REPO_ROOT / "checkpoints").glob("*/manifest.json")
                                               if "model_kind" in json.loads(p.read_text()))
+    cubes = [c for c in ckpts if family(json.loads((c / "manifest.json").read_text())["config"]["env"]["name"]) == "cube"]
+    ckpts = [c for c in ckpts if c not in cubes]
+    if cubes:
+        print("\n".join(cube_lines(cubes)) + "\n")
     print("| checkpoint | steps | params | val loss | train h | unguided: no warp / in free cells | "
           "guided: no warp / in free cells / within 2.0 of goal |")
     print("|---|---|---|---|---|---|---|")

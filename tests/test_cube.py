@@ -286,6 +286,10 @@ def test_train_and_load_a_cube_model(tiny_cube, tmp_path, param):
     assert manifest["token_dim"] == 30 and model.frame_dim == 3
     x = torch.randn(2, 3, 30)
     assert model(x, torch.zeros(2, 3, dtype=torch.long)).shape == (2, 3, 30)
+    from fmctd_dist.evaluation.cube_quality import cube_plan_quality
+
+    row = cube_plan_quality(tmp_path / "ckpt", cfg, n=4)  # the quality-table row runs end to end on a cube model
+    assert row["warp"] == 2.0 and row["data"]["no_warp"] == 1.0 and 0.0 <= row["model"]["no_warp"] <= 1.0
     maze = load_config(["env=pointmaze-medium", "jump=5", *small[:5]], method="mctd")
     with pytest.raises(CheckpointError, match="env.name='cube-single'.*env.name='pointmaze-medium'"):
         load_checkpoint(tmp_path / "ckpt", maze)
@@ -300,3 +304,22 @@ def test_v_offset_keeps_each_cube_coordinate_apart():
     frames = torch.arange(2 * 3, dtype=torch.float32).reshape(1, 1, 2, 3)  # one token, 2 frames of (x, y, z)
     off = token_offset(frames.reshape(1, 1, 6), frame_dim=3).reshape(2, 3)
     assert torch.equal(off, torch.tensor([[1.5, 2.5, 3.5]] * 2))
+
+
+def test_cube_plan_rules_on_hand_made_plans():
+    """The quality table's rules: a warp, a cube left mid-air, a clean stack, two cubes moved at once."""
+    from fmctd_dist.evaluation.cube_quality import plan_row, supported
+
+    start = np.array([[0.0, 0.0, 0.2, 2.0, 0.0, 0.2]])  # two cubes on the table
+    lift = np.linspace(start[0], [0.0, 0.0, 1.5, 2.0, 0.0, 0.2], 9)[1:][None]  # cube 0 lifted, left mid-air
+    stack = np.linspace(start[0], [2.0, 0.1, 0.6, 2.0, 0.0, 0.2], 9)[1:][None]  # cube 0 onto cube 1
+    both = np.linspace(start[0], [1.5, 0.0, 0.2, 3.5, 0.0, 0.2], 9)[1:][None]  # both slide 1.5
+    jump = stack.copy()
+    jump[0, 4:] += [1.0, 1.0, 0.0, 0.0, 0.0, 0.0]  # cube 0 jumps by 1.41 at frame 4 (H=1 threshold 1.0)
+    assert supported(stack[:, -1]).all() and not supported(lift[:, -1]).any() and supported(start).all()
+    r = {name: plan_row(p, start, jump=1, frame_stack=4) for name, p in
+         (("lift", lift), ("stack", stack), ("both", both), ("jump", jump))}
+    assert r["stack"]["no_warp"] == 1 and r["stack"]["supported_end"] == 1 and r["stack"]["one_mover"] == 1
+    assert r["lift"]["supported_end"] == 0 and r["lift"]["moved"] == 1
+    assert r["both"]["one_mover"] == 0 and r["both"]["supported_end"] == 1
+    assert r["jump"]["no_warp"] == 0 and r["jump"]["max_step"] > 1.0
