@@ -1,0 +1,103 @@
+"""Checkpoints of the visual maze's three parts: the VAE, the position estimator, the inverse dynamics.
+
+Each is a dir with ``model.pt`` (state_dict, loaded with ``weights_only=True``) and
+``manifest.json`` (kind, env, latent size, config, data digests, steps, wall time, metrics,
+sha256), as the planner's checkpoints. The estimator and the inverse dynamics read latents, so
+their manifests name the VAE (its digest) whose latents they were trained on: a head is only
+ever loaded beside that VAE. Anything wrong (missing, corrupt, another kind such as a point
+maze planner, another env, another latent size, another VAE) is one :class:`CheckpointError`
+naming the field, the value and the fix.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+from torch import nn
+
+from fmctd_dist.diffusion.checkpoint import (atomic_torch_save, module_state, sha256_file, torch_load_weights,
+                                             write_manifest)
+from fmctd_dist.errors import CheckpointError
+
+FORMAT_VERSION = 1
+MODEL_FILE = "model.pt"
+MANIFEST_FILE = "manifest.json"
+KINDS = {"vae": "visual-vae", "estimator": "visual-estimator", "invdyn": "visual-invdyn"}
+WHAT = {"visual-vae": "the visual maze's VAE", "visual-estimator": "the visual maze's position estimator",
+        "visual-invdyn": "the visual maze's inverse dynamics", "df": "a Diffusion Forcing planner (state space)",
+        "diffuser": "a Diffuser planner (state space)", "ant-goal-bc": "an AntMaze low-level policy",
+        "ant-direction-sac": "the ant expert that makes datasets"}
+
+
+def train_fix(part: str, env: str, out: str | Path | None = None) -> str:
+    where = f" {part}.out={out}" if out is not None else ""
+    return f"train one with `python jobs/train_visual.py part={part} env={env}{where}`"
+
+
+def save_part(out_dir: str | Path, part: str, net: nn.Module, fields: dict[str, Any]) -> dict[str, Any]:
+    """Write model.pt then manifest.json; ``fields`` must hold ``env`` and ``latent_dim``."""
+    for key in ("env", "latent_dim"):
+        if key not in fields:
+            raise ValueError(f"fields needs {key!r}")
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    atomic_torch_save(module_state(net), out_dir / MODEL_FILE)
+    sha = sha256_file(out_dir / MODEL_FILE)
+    manifest = {**fields, "kind": KINDS[part], "format": FORMAT_VERSION,
+                "param_count": sum(p.numel() for p in net.parameters()), "model_sha256": sha, "digest": sha[:16]}
+    write_manifest(manifest, out_dir / MANIFEST_FILE)
+    return manifest
+
+
+def read_part_manifest(ckpt_dir: str | Path, part: str, env: str, latent_dim: int | None = None,
+                       vae_digest: str | None = None) -> dict[str, Any]:
+    """The manifest of a ``part`` checkpoint for ``env``, checked (kind, env, latent size, VAE, sha256)."""
+    ckpt_dir = Path(ckpt_dir)
+    fix = train_fix(part, env, ckpt_dir)
+    name = f"visual {part} checkpoint {ckpt_dir}"
+    for path in (ckpt_dir, ckpt_dir / MODEL_FILE, ckpt_dir / MANIFEST_FILE):
+        if not path.exists():
+            raise CheckpointError(f"{name}: {path} does not exist; {fix} (or point {part}.out to its dir)")
+    try:
+        m = json.loads((ckpt_dir / MANIFEST_FILE).read_text())
+    except (OSError, json.JSONDecodeError) as e:
+        raise CheckpointError(f"{name}: {MANIFEST_FILE} is unreadable ({e}); {fix}") from None
+    if not isinstance(m, dict):
+        raise CheckpointError(f"{name}: {MANIFEST_FILE} is not a JSON object; {fix}")
+    kind = m.get("kind") or m.get("model_kind") or "unknown"
+    if kind != KINDS[part]:
+        cfg = m.get("config") if isinstance(m.get("config"), dict) else {}
+        trained = m.get("env") or (cfg.get("env") if isinstance(cfg.get("env"), dict) else {}).get("name", "?")
+        raise CheckpointError(f"{name} holds kind={kind!r} ({WHAT.get(kind, 'not a visual-maze part')}, env "
+                              f"{trained}), not {WHAT[KINDS[part]]} (kind={KINDS[part]!r}); point {part}.out to a "
+                              f"dir written by jobs/train_visual.py part={part}, or {train_fix(part, env)}")
+    if m.get("env") != env:
+        raise CheckpointError(f"{name}: env={m.get('env')!r} but this run's env is {env!r}; point {part}.out to "
+                              f"a {part} trained on {env}, or {train_fix(part, env)}")
+    if latent_dim is not None and m.get("latent_dim") != latent_dim:
+        raise CheckpointError(f"{name}: latent_dim={m.get('latent_dim')!r} but the latents here are {latent_dim}-D; "
+                              f"use the {part} trained on this VAE's latents, or {train_fix(part, env)}")
+    if vae_digest is not None and m.get("vae", {}).get("digest") != vae_digest:
+        raise CheckpointError(f"{name}: vae.digest={m.get('vae', {}).get('digest')!r} but the VAE given is "
+                              f"{vae_digest!r}; its latents mean something else: use the {part} trained on this "
+                              f"VAE, or {train_fix(part, env)}")
+    sha = sha256_file(ckpt_dir / MODEL_FILE)
+    if sha != m.get("model_sha256"):
+        raise CheckpointError(f"{name}: {MODEL_FILE} has sha256 {sha[:16]}... but the manifest records "
+                              f"{str(m.get('model_sha256'))[:16]}... (corrupt or overwritten); {fix}")
+    return m
+
+
+def load_state(ckpt_dir: Path, net: nn.Module, part: str, env: str) -> nn.Module:
+    """Load model.pt into ``net`` (strict); a shape or unpickling failure is one CheckpointError."""
+    fix = train_fix(part, env, ckpt_dir)
+    state = torch_load_weights(ckpt_dir / MODEL_FILE, f"visual {part} checkpoint {ckpt_dir}", fix)
+    try:
+        net.load_state_dict(state, strict=True)
+    except Exception as e:  # noqa: BLE001 - missing keys, shapes: a checkpoint of another architecture
+        line = str(e).strip().splitlines()[0][:200] if str(e).strip() else type(e).__name__
+        raise CheckpointError(f"visual {part} checkpoint {ckpt_dir}: {MODEL_FILE} does not fit its manifest's "
+                              f"network ({line}); {fix}") from None
+    return net.eval()
