@@ -1,24 +1,28 @@
-"""Reach rate of a trained AntMaze policy on held-out data, beside the ant expert steered at the same subgoals.
+"""Reach rate of a trained low-level policy on held-out data, beside the family's scripted reference and zero actions.
 
     python jobs/eval_policy.py env=antmaze-medium policy.out=checkpoints/antmaze-medium-policy
-    python jobs/eval_policy.py env=antmaze-medium data.root=/tmp/antdata data.episodes=20 \
+    python jobs/eval_policy.py env=antmaze-medium data.root=/tmp/antdata data.episodes=20 \\
         policy.out=runs/antmaze-medium-policy reach.rows=200 reach.seed=0
+    python jobs/eval_policy.py env=cube-single policy.out=checkpoints/cube-single-policy reach.rows=100
+    python jobs/eval_policy.py env=cube-double policy.out=checkpoints/cube-single-policy   # the single-cube policy
 
-For reach.rows val rows (seeded): restore the ant's MuJoCo state from the row, subgoal = the
-episode's x, y reach.offset steps later, reach.max_steps env steps; reached = within
-reach.radius after a step (fmctd_dist/control/policy/ant_reach.py). reach.expert=false skips the expert.
-The policy is checked before the data is read: a missing dir, another kind of checkpoint
-or one trained for another maze is one `error:` line.
+Ant (fmctd_dist/control/policy/ant_reach.py): for reach.rows val rows (seeded), restore the
+ant's MuJoCo state, subgoal = the episode's x, y reach.offset steps later, reach.max_steps env
+steps; reached = within reach.radius after a step; reference: the ant expert. Cube
+(fmctd_dist/control/policy/cube_reach.py): restore a val row inside a pick-and-place, the
+plan is the data's cube path to its end (subgoal reach.offset steps ahead, moved on within
+reach.advance), reached = the cube within reach.radius (0.4 obs units = 0.04 m) of the end;
+reference: OGBench's CubePlanOracle. reach.expert=false skips the reference, reach.zero=false
+the zero actions. The policy is checked before the data is read: a missing dir, another kind
+of checkpoint or one trained for another env is one `error:` line.
 """
 
 import time
 
-from fmctd_dist.control.policy.ant import load_policy
-from fmctd_dist.control.policy.config import load_policy_args, policy_dir
-from fmctd_dist.control.policy.ant_data import load_policy_data
-from fmctd_dist.control.policy.ant_reach import evaluate_reach, expert_controller, zero_controller, format_reach
 from fmctd_dist.cli import run
-from fmctd_dist.config import resolve_path
+from fmctd_dist.control.policy.checkpoint import load_policy
+from fmctd_dist.control.policy.config import load_policy_args, policy_dir
+from fmctd_dist.control.policy.hooks import hooks_for_env
 from fmctd_dist.device import set_threads
 
 
@@ -26,21 +30,16 @@ def main(argv: list[str]) -> int:
     cfg, pcfg = load_policy_args(argv)
     set_threads(pcfg.policy.threads)
     policy = load_policy(policy_dir(cfg, pcfg), env_name=cfg.env.name)
-    ctrls = {"policy": policy.act}
-    if pcfg.reach.expert:
-        from fmctd_dist.ant.expert import load_expert
-
-        ctrls["expert"] = expert_controller(load_expert(resolve_path(cfg.data.expert)))
-    if pcfg.reach.zero:
-        ctrls["zero"] = zero_controller
-    _, val, _ = load_policy_data(cfg, drop_fallen=True)
+    hooks = hooks_for_env(cfg.env.name)
+    _, val, _ = hooks.load(cfg, pcfg)
     r = pcfg.reach
     t0 = time.time()
-    results = evaluate_reach(cfg.env.name, ctrls, val, r.rows, r.offset, r.max_steps, r.radius, r.seed)
+    results = hooks.reach(cfg, pcfg, policy.act, val, progress=True)
     print(f"reach on {cfg.env.name} val rows (offset {r.offset}, seed {r.seed}), policy {policy.where} "
-          f"(digest {policy.manifest['digest']}, {policy.manifest['steps']} steps), {time.time() - t0:.0f}s:")
+          f"(trained on {policy.env}, digest {policy.manifest['digest']}, {policy.manifest['steps']} steps), "
+          f"{time.time() - t0:.0f}s:")
     for name, res in results.items():
-        print(format_reach(name, res))
+        print(hooks.format(name, res))
     return 0
 
 

@@ -13,9 +13,11 @@ import numpy as np
 import pytest
 import torch
 
-from fmctd_dist.control.policy.ant import MODEL_FILE, NAME, load_policy, policy_input
+from fmctd_dist.control.policy.ant import NAME, policy_input
+from fmctd_dist.control.policy.ant_data import make_rows, run_ends
+from fmctd_dist.control.policy.checkpoint import MODEL_FILE, load_policy
 from fmctd_dist.control.policy.config import load_policy_args
-from fmctd_dist.control.policy.ant_data import make_rows, run_ends, sample_offsets, sample_pairs
+from fmctd_dist.control.policy.hindsight import sample_offsets, sample_pairs
 from fmctd_dist.control.policy.train import train_policy
 from fmctd_dist.config import REPO_ROOT
 from fmctd_dist.control.ant_controller import AntPlanController, run_plan
@@ -85,7 +87,7 @@ def test_subgoals_stay_inside_the_episode_and_off_fallen_rows():
     obs[1, 80:120, 2] = 0.1  # episode 1 falls for 40 steps (unhealthy height)
     rows = make_rows(obs, np.zeros((e, s, 8), np.float32), np.zeros((e, s, 2), np.float32), drop_fallen=True)
     assert rows.stats == {"rows": 600, "fallen_rows": 40, "episodes_with_falls": 1, "trained_rows": 600 - 40 - 4}
-    i, j = sample_pairs(rows, np.random.default_rng(0), 100_000, 0.2, 2)
+    i, j = sample_pairs(rows.valid, rows.end, np.random.default_rng(0), 100_000, 0.2, 2)
     ep_i, ep_j, t_i, t_j = i // s, j // s, i % s, j % s
     assert np.array_equal(ep_i, ep_j) and np.all(j > i) and np.all(j <= rows.end[i])
     assert np.array_equal(rows.xy[j, 0], t_j) and np.array_equal(rows.xy[j, 1], ep_j)
@@ -144,7 +146,7 @@ def test_checkpoint_round_trip_loads_with_weights_only_and_acts_identically(trai
     assert np.array_equal(act, b.act(obs, sub))
     np.testing.assert_allclose(a.act(obs[3], sub[3]), act[3], atol=1e-6)  # one row: another matmul path
     x = torch.from_numpy(policy_input(obs, sub, 4.0))
-    net = type(a.net)([32, 32])
+    net = type(a.net)([32, 32], 29, 8)
     net.load_state_dict(state)
     assert np.array_equal(net.eval()(x).detach().numpy().astype(np.float64), act)
 

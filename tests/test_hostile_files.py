@@ -92,7 +92,7 @@ def test_train_state_with_code_payload_is_refused_and_never_runs(tmp_path):
 
 def test_ant_checkpoints_with_code_payload_are_refused(tmp_path):
     from fmctd_dist.ant.expert import load_expert
-    from fmctd_dist.control.policy.ant import load_policy
+    from fmctd_dist.control.policy.checkpoint import load_policy
     from fmctd_dist.config import REPO_ROOT
 
     marker = tmp_path / "ran"

@@ -3,7 +3,7 @@
 The authors' AntMaze controller (reference §7): the subgoal is the plan point 10 steps
 ahead, moved 10 further each time the ant comes within 1.0 of it, held at the plan's last
 point; a low-level policy maps (ant state, subgoal) to torques. The policy is any callable
-``(obs [29], subgoal [2]) -> torques [8]`` (:class:`fmctd_dist.control.policy.ant.AntPolicy`, or
+``(obs [29], subgoal [2]) -> torques [8]`` (:class:`fmctd_dist.control.policy.checkpoint.GoalPolicy`, or
 the expert via :func:`fmctd_dist.control.policy.ant_reach.expert_controller`), so this module needs no
 torch and tests can drive it with fakes.
 """

@@ -34,7 +34,7 @@ def check_controller(cfg: Config) -> dict[str, Any] | None:
     """AntMaze: the policy manifest (exists, right kind, trained for this maze), else CheckpointError. Point: None."""
     if not is_ant(cfg.env.name):
         return None
-    from fmctd_dist.control.policy.ant import read_policy_manifest  # deferred: torch
+    from fmctd_dist.control.policy.checkpoint import read_policy_manifest  # deferred: torch
     from fmctd_dist.errors import CheckpointError
 
     try:
@@ -50,7 +50,7 @@ def controller_factory(cfg: Config) -> ControllerFactory:
         from fmctd_dist.control.pd import PDController
 
         return PDController
-    from fmctd_dist.control.policy.ant import load_policy
+    from fmctd_dist.control.policy.checkpoint import load_policy
     from fmctd_dist.control.ant_controller import AntPlanController
 
     policy = load_policy(policy_dir(cfg), cfg.env.name)

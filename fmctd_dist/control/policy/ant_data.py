@@ -5,7 +5,8 @@ subgoal is where the ant actually was ``k`` steps later: whatever the data's goa
 torque at t moved the ant towards x, y(t + k), so regressing it onto (state, that point) is
 a goal-conditioned behaviour clone with hindsight relabelling.
 
-``k`` is the sum of ``draws`` Geometric(p) draws (each >= 1; mean draws / p). The authors'
+``k`` is the sum of ``draws`` Geometric(p) draws (each >= 1; mean draws / p;
+:mod:`fmctd_dist.control.policy.hindsight`, shared with the cube). The authors'
 low-level policy used "a geometric window p=0.2 x 10 steps" (reference §7); we keep p=0.2
 and take two draws: mean 10 steps (~1.1 m at the data's 1.25 m/s, the controller's
 subgoal interval), mode 5-6, 90% within 2..19 steps. One draw (mean 5) puts 20% of the
@@ -28,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from fmctd_dist.config import Config
+from fmctd_dist.control.policy.ant import policy_input
 from fmctd_dist.data.dataset import dataset_dir, load_manifest, regenerate_fix
 from fmctd_dist.data.npz import load_npz
 from fmctd_dist.envs.antmaze import ACT_DIM, OBS_DIM, healthy, upright
@@ -48,6 +50,10 @@ class PolicyRows:
     @property
     def xy(self) -> np.ndarray:
         return self.obs[:, :2]
+
+    def inputs(self, i: np.ndarray, j: np.ndarray, max_dist: float) -> np.ndarray:
+        """Network inputs [B, 29] of rows i with the ant's x, y at rows j as subgoal."""
+        return policy_input(self.obs[i], self.obs[j, :2], max_dist)
 
 
 def run_ends(ok: np.ndarray) -> np.ndarray:
@@ -80,19 +86,6 @@ def make_rows(obs: np.ndarray, actions: np.ndarray, goals: np.ndarray, drop_fall
     return PolicyRows(np.ascontiguousarray(obs.reshape(-1, OBS_DIM), np.float32),
                       np.ascontiguousarray(actions.reshape(-1, ACT_DIM), np.float32),
                       np.ascontiguousarray(goals.reshape(-1, 2), np.float32), end, valid, stats)
-
-
-def sample_offsets(rng: np.random.Generator, n: int, p: float, draws: int) -> np.ndarray:
-    """[n] int64 offsets k = sum of ``draws`` Geometric(p) draws (support >= draws, mean draws / p)."""
-    return rng.geometric(p, size=(n, draws)).sum(axis=1).astype(np.int64)
-
-
-def sample_pairs(rows: PolicyRows, rng: np.random.Generator, n: int, p: float,
-                 draws: int) -> tuple[np.ndarray, np.ndarray]:
-    """n (row, subgoal row) index pairs: row uniform over ``valid``, subgoal row min(row + k, end[row])."""
-    i = rows.valid[rng.integers(0, rows.valid.size, n)]
-    j = np.minimum(i + sample_offsets(rng, n, p, draws), rows.end[i])
-    return i, j
 
 
 def load_policy_data(cfg: Config, drop_fallen: bool,

@@ -1,13 +1,15 @@
-"""Training loop of the goal-conditioned ant policy: resumable, bitwise deterministic from a seed.
+"""Training loop of the goal-conditioned policy (ant, cube): resumable, bitwise deterministic from a seed.
 
 Each step draws ``batch_size`` (row, hindsight subgoal) pairs from the train split and
-takes one AdamW step on the MSE to the row's torque. Every ``val_every`` steps the MSE on a
-fixed set of ``val_rows`` val pairs is logged beside the *expert's* MSE on the same rows
-(the noise floor: the data is expert + N(0, 0.2^2), so no policy gets far below ~0.04).
+takes one AdamW step on the MSE to the row's action. Every ``val_every`` steps the MSE on a
+fixed set of ``val_rows`` val pairs is logged, beside the family's noise floor where it has
+one (the ant: the expert's MSE on the same rows; the data is expert + N(0, 0.2^2)).
 Every ``ckpt_every`` steps it writes model.pt + manifest.json and train_state.pt (network,
 optimiser, batch RNG, history); rerunning continues from there and is bitwise the
-uninterrupted run (same thread count). At the end, with ``reach.rows > 0``, the reach
-rate of the policy and of the expert (:mod:`fmctd_dist.control.policy.ant_reach`) go into the manifest.
+uninterrupted run (same thread count). ``policy.time_budget_s`` stops a run early at a
+checkpoint (the next call continues it). At the end, with ``reach.rows > 0``, the reach
+rates of the policy and the family's references go into the manifest. What differs by
+family (rows, floor, reach test) comes from :mod:`fmctd_dist.control.policy.hooks`.
 """
 
 from __future__ import annotations
@@ -20,12 +22,12 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from fmctd_dist.control.policy.ant import MANIFEST_FILE, NAME, GoalPolicyNet, build_net, policy_input, \
-    read_policy_manifest, save_policy
+from fmctd_dist.config import Config, git_sha
+from fmctd_dist.control.policy.checkpoint import MANIFEST_FILE, read_policy_manifest, save_policy
 from fmctd_dist.control.policy.config import PolicyConfig, policy_dir
-from fmctd_dist.control.policy.ant_data import PolicyRows, load_policy_data, sample_pairs
-from fmctd_dist.data.dataset import dataset_dir
-from fmctd_dist.config import Config, git_sha, resolve_path
+from fmctd_dist.control.policy.hindsight import sample_pairs
+from fmctd_dist.control.policy.hooks import hooks_for_env
+from fmctd_dist.control.policy.network import GoalPolicyNet, build_net
 from fmctd_dist.device import set_threads
 from fmctd_dist.diffusion.checkpoint import load_train_state, save_train_state
 from fmctd_dist.errors import CheckpointError
@@ -40,10 +42,13 @@ def _rng(seed: int, stream: int) -> np.random.Generator:
     return np.random.Generator(np.random.PCG64(np.random.SeedSequence([seed, stream])))
 
 
-def make_batch(rows: PolicyRows, i: np.ndarray, j: np.ndarray, max_dist: float) -> tuple[torch.Tensor, torch.Tensor]:
-    """(row, subgoal row) indices -> inputs [B, 29], target torques [B, 8]."""
-    x = policy_input(rows.obs[i], rows.obs[j, :2], max_dist)
-    return torch.from_numpy(x), torch.from_numpy(rows.actions[i])
+def make_batch(rows: Any, i: np.ndarray, j: np.ndarray, max_dist: float) -> tuple[torch.Tensor, torch.Tensor]:
+    """(row, subgoal row) indices -> inputs [B, in_dim], target actions [B, act_dim]."""
+    return torch.from_numpy(rows.inputs(i, j, max_dist)), torch.from_numpy(rows.actions[i])
+
+
+def pairs(rows: Any, rng: np.random.Generator, n: int, pcfg: PolicyConfig) -> tuple[np.ndarray, np.ndarray]:
+    return sample_pairs(rows.valid, rows.end, rng, n, pcfg.policy.geom_p, pcfg.policy.geom_draws)
 
 
 @torch.no_grad()
@@ -52,21 +57,6 @@ def mse(net: GoalPolicyNet, x: torch.Tensor, y: torch.Tensor, chunk: int = 4096)
     total = sum(float((net(x[k:k + chunk]) - y[k:k + chunk]).square().sum()) for k in range(0, len(x), chunk))
     net.train()
     return total / y.numel()
-
-
-def expert_mse(cfg: Config, rows: PolicyRows, i: np.ndarray) -> float | None:
-    """The expert's MSE to the data's torques on rows i (its own input: the oracle direction to the data's goal)."""
-    from fmctd_dist.ant.direction_env import expert_input
-    from fmctd_dist.ant.expert import load_expert
-    from fmctd_dist.data.oracle import NoisyOracle
-    from fmctd_dist.envs.maze import maze_geometry
-
-    expert = load_expert(resolve_path(cfg.data.expert))
-    oracle = NoisyOracle(maze_geometry(cfg.env.name), 0.0)
-    obs = rows.obs[i].astype(np.float64)
-    dirs = np.stack([oracle.direction(o[:2], g) for o, g in zip(obs, rows.goals[i].astype(np.float64))])
-    pred = expert.act(expert_input(obs, dirs))
-    return float(np.mean((pred - rows.actions[i]) ** 2))
 
 
 def _get(d: dict[str, Any], dotted: str) -> Any:
@@ -94,7 +84,8 @@ def _finished(out: Path) -> dict[str, Any]:
     """Summary of a finished run from its manifest (reach included)."""
     m = read_policy_manifest(out)
     return {"step": int(m["steps"]), "wall_time_s": float(m["wall_time_s"]), "out_dir": str(out),
-            "resumed_from": int(m["steps"]), "name": NAME, "rows": m["dataset"]["rows"], **m["metrics"]}
+            "resumed_from": int(m["steps"]), "name": m["name"], "rows": m["dataset"]["rows"], "stopped": None,
+            **m["metrics"]}
 
 
 def train_policy(cfg: Config, pcfg: PolicyConfig, out_dir: str | Path | None = None,
@@ -102,8 +93,10 @@ def train_policy(cfg: Config, pcfg: PolicyConfig, out_dir: str | Path | None = N
     """Train (or resume) into out_dir (default policy.out); returns the manifest's summary."""
     p = pcfg.policy
     set_threads(p.threads)
+    hooks = hooks_for_env(cfg.env.name)
+    spec = hooks.spec
     out = Path(out_dir) if out_dir is not None else policy_dir(cfg, pcfg)
-    train_rows, val_rows, data_manifest = load_policy_data(cfg, p.drop_fallen)
+    train_rows, val_rows, data_manifest = hooks.load(cfg, pcfg)
     data_sha = dict(data_manifest["sha256"])
 
     m = read_policy_manifest(out) if (out / MANIFEST_FILE).exists() else None  # another kind: CheckpointError
@@ -118,14 +111,14 @@ def train_policy(cfg: Config, pcfg: PolicyConfig, out_dir: str | Path | None = N
         if int(state["step"]) >= p.max_steps:
             return _finished(out)
 
-    net = build_net(p.hidden, p.seed)
-    ni, nj = sample_pairs(train_rows, _rng(p.seed, NORM_STREAM), NORM_ROWS, p.geom_p, p.geom_draws)
+    net = build_net(p.hidden, spec.in_dim, spec.act_dim, p.seed)
+    ni, nj = pairs(train_rows, _rng(p.seed, NORM_STREAM), NORM_ROWS, pcfg)
     net.set_normaliser(make_batch(train_rows, ni, nj, p.max_subgoal_dist)[0].numpy())
     opt = torch.optim.AdamW(net.parameters(), lr=p.lr, weight_decay=p.weight_decay)
     rng = _rng(p.seed, BATCH_STREAM)
-    vi, vj = sample_pairs(val_rows, _rng(p.seed, VAL_STREAM), p.val_rows, p.geom_p, p.geom_draws)
+    vi, vj = pairs(val_rows, _rng(p.seed, VAL_STREAM), p.val_rows, pcfg)
     vx, vy = make_batch(val_rows, vi, vj, p.max_subgoal_dist)
-    floor = expert_mse(cfg, val_rows, vi)
+    floor = hooks.floor(cfg, val_rows, vi)
     step, wall, resumed_from = 0, 0.0, None
     hist: dict[str, list[list[float]]] = {"train": [], "val": []}  # [step, loss]
     reach: dict[str, Any] | None = None
@@ -138,9 +131,9 @@ def train_policy(cfg: Config, pcfg: PolicyConfig, out_dir: str | Path | None = N
         step, wall, hist, resumed_from = int(state["step"]), float(state["wall_time_s"]), state["history"], \
             int(state["step"])
 
-    dataset = {"path": str(dataset_dir(cfg)), "sha256": data_sha, "digest": data_sha["train"][:16],
+    dataset = {**hooks.dataset_fields(cfg, data_manifest), "sha256": data_sha, "digest": data_sha["train"][:16],
                "episodes": data_manifest["episodes"], "episode_steps": data_manifest["episode_steps"],
-               "seed": data_manifest["seed"], "noise": data_manifest["noise"], "expert": data_manifest.get("expert"),
+               "seed": data_manifest["seed"], "noise": data_manifest["noise"],
                "rows": {"train": train_rows.stats, "val": val_rows.stats}}
 
     def metrics() -> dict[str, Any]:
@@ -151,7 +144,7 @@ def train_policy(cfg: Config, pcfg: PolicyConfig, out_dir: str | Path | None = N
                 "reach": reach}
 
     def save() -> None:
-        save_policy(out, net, {
+        save_policy(out, net, spec, {
             "config": pcfg.to_dict(), "env": cfg.env.name, "dataset": dataset, "git_sha": git_sha(),
             "steps": step, "wall_time_s": wall, "metrics": metrics(), "val_history": hist["val"],
             "data_config": {k: getattr(cfg.data, k) for k in ("root", "seed", "episodes", "episode_steps", "noise",
@@ -163,11 +156,12 @@ def train_policy(cfg: Config, pcfg: PolicyConfig, out_dir: str | Path | None = N
 
     bar = tqdm(total=p.max_steps, initial=step, disable=not progress, desc=f"policy {cfg.env.name}",
                dynamic_ncols=True)
-    t_seg = t_log = time.perf_counter()
+    t_seg = t_log = t_call = time.perf_counter()
+    stopped = None
     n_log, loss_sum = 0, 0.0
     net.train()
     while step < p.max_steps:
-        i, j = sample_pairs(train_rows, rng, p.batch_size, p.geom_p, p.geom_draws)
+        i, j = pairs(train_rows, rng, p.batch_size, pcfg)
         x, y = make_batch(train_rows, i, j, p.max_subgoal_dist)
         loss = (net(x) - y).square().mean()
         opt.zero_grad(set_to_none=True)
@@ -188,35 +182,29 @@ def train_policy(cfg: Config, pcfg: PolicyConfig, out_dir: str | Path | None = N
         if step % p.val_every == 0 or step == p.max_steps:
             hist["val"].append([step, mse(net, vx, vy)])
         if step == p.max_steps and pcfg.reach.rows > 0:
-            reach = run_reach(cfg, pcfg, net, val_rows)
+            reach = run_reach(cfg, pcfg, hooks, net, val_rows)
         if step % p.ckpt_every == 0 or step == p.max_steps:
             now = time.perf_counter()
             wall += now - t_seg
             t_seg = now
             save()
+            if p.time_budget_s > 0 and now - t_call >= p.time_budget_s and step < p.max_steps:
+                stopped = f"policy.time_budget_s={p.time_budget_s:g} reached at step {step}; rerun to continue"
+                break
     bar.close()
-    return {"step": step, "wall_time_s": wall, "out_dir": str(out), "resumed_from": resumed_from, "name": NAME,
-            "rows": dataset["rows"], **metrics()}
+    return {"step": step, "wall_time_s": wall, "out_dir": str(out), "resumed_from": resumed_from, "name": spec.name,
+            "rows": dataset["rows"], "stopped": stopped, **metrics()}
 
 
-def run_reach(cfg: Config, pcfg: PolicyConfig, net: GoalPolicyNet, val_rows: PolicyRows) -> dict[str, Any]:
-    """Reach rate of this network (and of the expert when reach.expert) on val rows."""
-    from fmctd_dist.ant.expert import load_expert
-    from fmctd_dist.control.policy.ant_reach import evaluate_reach, expert_controller, zero_controller
-
-    max_dist = pcfg.policy.max_subgoal_dist
+def run_reach(cfg: Config, pcfg: PolicyConfig, hooks: Any, net: GoalPolicyNet, val_rows: Any) -> dict[str, Any]:
+    """Reach rate of this network (and of the family's references when asked) on val rows."""
+    max_dist, make_input = pcfg.policy.max_subgoal_dist, hooks.spec.make_input
 
     @torch.no_grad()
     def policy(obs: np.ndarray, subgoal: np.ndarray) -> np.ndarray:
-        return net(torch.from_numpy(policy_input(obs, subgoal, max_dist))).numpy().astype(np.float64)
+        return net(torch.from_numpy(make_input(obs, subgoal, max_dist))).numpy().astype(np.float64)
 
     net.eval()
-    ctrls = {"policy": policy}
-    if pcfg.reach.expert:
-        ctrls["expert"] = expert_controller(load_expert(resolve_path(cfg.data.expert)))
-    if pcfg.reach.zero:
-        ctrls["zero"] = zero_controller
-    r = pcfg.reach
-    out = evaluate_reach(cfg.env.name, ctrls, val_rows, r.rows, r.offset, r.max_steps, r.radius, r.seed)
+    out = hooks.reach(cfg, pcfg, policy, val_rows)
     net.train()
     return out

@@ -1,0 +1,145 @@
+"""Goal-conditioned policy checkpoints, for every family: write, read the manifest, verify and load.
+
+Like the expert's: ``model.pt`` (state_dict, input normalisation included) + ``manifest.json``
+(kind, env, config, dataset digests, git sha, metrics, sha256), loaded with
+``torch.load(weights_only=True)``. The manifest's ``kind`` names the family's
+:class:`~fmctd_dist.control.policy.spec.PolicySpec`; anything wrong (missing, another kind,
+another env, corrupt, shapes) is one :class:`CheckpointError` that says what to do.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from fmctd_dist.control.policy.network import GoalPolicyNet
+from fmctd_dist.control.policy.spec import PolicySpec
+from fmctd_dist.control.policy.specs import BY_KIND, spec_for_env
+from fmctd_dist.diffusion.checkpoint import atomic_torch_save, first_line, module_state, sha256_file, write_manifest
+from fmctd_dist.errors import CheckpointError
+from fmctd_dist.families import family
+
+FORMAT_VERSION = 1
+MODEL_FILE = "model.pt"
+MANIFEST_FILE = "manifest.json"
+OTHER_KINDS = {"ant-direction-sac": "the ant expert that makes datasets", "df": "a Diffusion Forcing planner",
+               "diffuser": "a Diffuser planner"}
+
+
+def label(spec: PolicySpec | None) -> str:
+    """How errors name the policy: 'ant policy', 'cube policy' (or 'policy' when the family is unknown)."""
+    return {"antmaze": "ant policy", "cube": "cube policy"}.get(spec.family, "policy") if spec else "policy"
+
+
+def train_fix(env_name: str = "<env>", out: str | Path | None = None) -> str:
+    where = f" policy.out={out}" if out is not None else ""
+    return f"train one with `python jobs/train_policy.py env={env_name}{where}`"
+
+
+def save_policy(out_dir: str | Path, net: GoalPolicyNet, spec: PolicySpec, fields: dict[str, Any]) -> dict[str, Any]:
+    """Write model.pt then manifest.json; ``fields`` must hold ``config`` (PolicyConfig.to_dict()) and ``env``."""
+    if "config" not in fields or "env" not in fields:
+        raise ValueError("fields needs 'config' (PolicyConfig.to_dict()) and 'env' (the env name)")
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    atomic_torch_save(module_state(net), out_dir / MODEL_FILE)
+    sha = sha256_file(out_dir / MODEL_FILE)
+    manifest = {**fields, "kind": spec.kind, "name": spec.name, "format": FORMAT_VERSION, "obs_dim": spec.obs_dim,
+                "act_dim": spec.act_dim, "in_dim": spec.in_dim, "input_layout": spec.input_layout,
+                "param_count": sum(p.numel() for p in net.parameters()), "model_sha256": sha, "digest": sha[:16]}
+    write_manifest(manifest, out_dir / MANIFEST_FILE)
+    return manifest
+
+
+def read_policy_manifest(ckpt_dir: str | Path, env_name: str | None = None) -> dict[str, Any]:
+    """The manifest of a policy dir; CheckpointError if missing, another kind, or trained for another env.
+
+    With ``env_name`` the policy must be of that env's family and, unless the family's policy
+    serves all its envs (cubes), trained on that very env.
+    """
+    ckpt_dir = Path(ckpt_dir)
+    want = spec_for_env(env_name) if env_name is not None else None
+    who = label(want)
+    fix = train_fix(env_name or "<env>", ckpt_dir)
+    for path in (ckpt_dir, ckpt_dir / MODEL_FILE, ckpt_dir / MANIFEST_FILE):
+        if not path.exists():
+            raise CheckpointError(f"{who}: {path} does not exist; {fix} (or point policy.out to its dir)")
+    try:
+        manifest = json.loads((ckpt_dir / MANIFEST_FILE).read_text())
+    except (OSError, json.JSONDecodeError) as e:
+        raise CheckpointError(f"{who}: {ckpt_dir / MANIFEST_FILE} is unreadable ({e}); {fix}") from None
+    if not isinstance(manifest, dict):
+        raise CheckpointError(f"{who}: {ckpt_dir / MANIFEST_FILE} is not a JSON object; {fix}")
+    kind = manifest.get("kind")
+    have = BY_KIND.get(kind) if isinstance(kind, str) else None
+    if have is None or (want is not None and have is not want):
+        what = kind or manifest.get("model_kind") or "unknown"
+        desc = f" ({OTHER_KINDS[what]})" if what in OTHER_KINDS else f" (the {label(have)})" if have else ""
+        wanted = f"a goal-conditioned {label(want)} (kind={want.kind!r})" if want else \
+            f"a goal-conditioned policy (kind one of {sorted(BY_KIND)})"
+        raise CheckpointError(
+            f"{who}: {ckpt_dir} holds a checkpoint of kind {what!r}{desc}, not {wanted}; point policy.out to a dir "
+            f"written by jobs/train_policy.py{' for ' + env_name if env_name else ''}, or {train_fix(env_name or '<env>')}"
+        )
+    trained_on = manifest.get("env")
+    if env_name is not None and trained_on != env_name and not (
+            have.any_env_of_family and isinstance(trained_on, str) and family(trained_on) == have.family):
+        raise CheckpointError(
+            f"{who} {ckpt_dir} was trained on {trained_on} data but the env is {env_name}; point "
+            f"policy.out to a policy trained on {env_name}, or {train_fix(env_name)}"
+        )
+    return manifest
+
+
+class GoalPolicy:
+    """A loaded policy: ``act(obs [..., obs_dim], subgoal [..., goal_dim]) -> action [..., act_dim]``, deterministic."""
+
+    def __init__(self, net: GoalPolicyNet, spec: PolicySpec, manifest: dict[str, Any], where: Path):
+        self.net, self.spec, self.manifest, self.where = net.eval(), spec, manifest, where
+        self.env = str(manifest["env"])
+        self.max_dist = float(manifest["config"]["policy"]["max_subgoal_dist"])
+
+    def act(self, obs: np.ndarray, subgoal: np.ndarray) -> np.ndarray:
+        obs, subgoal = np.asarray(obs), np.asarray(subgoal)
+        if obs.shape[-1:] != (self.spec.obs_dim,) or subgoal.shape[-1:] != (self.spec.goal_dim,):
+            raise ValueError(f"{label(self.spec)} {self.where}: got obs {obs.shape} and subgoal {subgoal.shape}; "
+                             f"{self.spec.input_layout}")
+        x = torch.from_numpy(self.spec.make_input(obs, subgoal, self.max_dist))
+        with torch.no_grad():
+            return self.net(x).numpy().astype(np.float64)
+
+    __call__ = act
+
+
+def load_policy(ckpt_dir: str | Path, env_name: str | None = None, obs_dim: int | None = None) -> GoalPolicy:
+    """Verify and load a policy. ``env_name``: the env it will drive; ``obs_dim``: what the caller feeds."""
+    from fmctd_dist.control.policy.config import policy_config_from_dict  # deferred: omegaconf
+
+    ckpt_dir = Path(ckpt_dir)
+    manifest = read_policy_manifest(ckpt_dir, env_name)
+    spec = BY_KIND[manifest["kind"]]
+    who = label(spec)
+    fix = train_fix(str(manifest.get("env")), ckpt_dir)
+    sha = sha256_file(ckpt_dir / MODEL_FILE)
+    if sha != manifest.get("model_sha256"):
+        raise CheckpointError(
+            f"{who} {ckpt_dir}: {MODEL_FILE} has sha256 {sha[:16]}... but manifest.json records "
+            f"{str(manifest.get('model_sha256'))[:16]}... (corrupt or overwritten); {fix}"
+        )
+    feeds = spec.obs_dim if obs_dim is None else obs_dim
+    if manifest.get("obs_dim") != feeds:
+        raise CheckpointError(
+            f"{who} {ckpt_dir} takes obs_dim={manifest.get('obs_dim')} but the caller feeds obs_dim={feeds}; "
+            f"{spec.input_layout}"
+        )
+    try:
+        cfg = policy_config_from_dict(manifest["config"])
+        net = GoalPolicyNet(list(cfg.policy.hidden), spec.in_dim, spec.act_dim)
+        net.load_state_dict(torch.load(ckpt_dir / MODEL_FILE, map_location="cpu", weights_only=True), strict=True)
+    except Exception as e:  # noqa: BLE001 - any unpickling/shape/config failure means a bad checkpoint
+        raise CheckpointError(f"{who} {ckpt_dir}: {MODEL_FILE} does not load ({first_line(e)}); {fix}") from None
+    return GoalPolicy(net, spec, manifest, ckpt_dir)
