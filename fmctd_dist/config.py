@@ -238,6 +238,10 @@ class TrainConfig:
     # What time_budget_s counts: wall seconds, or this process's CPU seconds (fair between recipe arms
     # trained one after another while other jobs load the machine; use with train.threads=1)
     budget_clock: str = spec("wall", choices=BUDGET_CLOCKS)
+    # A copy of the shipped (EMA) weights every this many budget-clock seconds, at the next resumable
+    # checkpoint, under <train.out>/snapshots/: what quality-vs-training-time curves are measured on
+    snapshot_every_s: float = spec(0.0, ge=0, why="seconds (train.budget_clock) between weight snapshots kept "
+                                                  "under <train.out>/snapshots/; 0 = none")
 
 
 @dataclass

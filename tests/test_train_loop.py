@@ -148,3 +148,23 @@ def test_init_from_with_another_architecture_is_one_clear_error(tmp_path):
     cfg = tiny_cfg(10, "model.width=64", f"train.init_from={tmp_path / 'src'}")
     with pytest.raises(CheckpointError, match=r"model.width=32 but the config has model.width=64"):
         train(cfg, FakeData(), tmp_path / "dst", progress=False)
+
+
+def test_snapshots_for_quality_curves(tmp_path, monkeypatch):
+    """train.snapshot_every_s keeps loadable copies of the shipped weights; a resumed run neither repeats nor
+    skips one (the folder says which exist)."""
+    from fmctd_dist.diffusion import train as train_mod
+    from fmctd_dist.diffusion.train import SNAPSHOTS, snapshot_due
+
+    assert snapshot_due(tmp_path, 0.0, 1e9) is None and snapshot_due(tmp_path, 60.0, 59.0) is None
+    assert snapshot_due(tmp_path, 60.0, 130.0) == "k002"
+    clock = iter(range(0, 10_000, 7))  # a fake budget clock: 7 s more at every save
+    monkeypatch.setattr(train_mod, "snapshot_due", lambda out, every, used: snapshot_due(out, every, next(clock)))
+    cfg = tiny_cfg(30, "train.snapshot_every_s=10")
+    train(cfg, FakeData(), tmp_path, progress=False)  # saves at steps 10, 20, 30: clock 0, 7, 14 -> k001 once
+    snaps = sorted(p.name for p in (tmp_path / SNAPSHOTS).iterdir())
+    assert snaps == ["k001-step0000030"]
+    model, manifest = load_checkpoint(tmp_path / SNAPSHOTS / snaps[0], cfg)
+    assert manifest["train_steps"] == 30
+    train(tiny_cfg(50, "train.snapshot_every_s=10"), FakeData(), tmp_path, progress=False)  # 21, 28 -> k002
+    assert sorted(p.name for p in (tmp_path / SNAPSHOTS).iterdir()) == ["k001-step0000030", "k002-step0000040"]

@@ -258,9 +258,13 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
 
     def save() -> None:
         summary = _summary(step, wall, history, out_dir, model, resumed_from)
-        save_checkpoint(out_dir, ema, {**base, "ema_decay": tc.ema_decay, "config": cfg.to_dict(),
-                                       "train_steps": step, "wall_time_s": wall, "cpu_time_s": cpu, "vs_paper": vs_paper(cfg, step),
-                                       "final_losses": summary["final_losses"], "val_history": history["val"]})
+        fields = {**base, "ema_decay": tc.ema_decay, "config": cfg.to_dict(), "train_steps": step, "wall_time_s": wall,
+                  "cpu_time_s": cpu, "vs_paper": vs_paper(cfg, step), "final_losses": summary["final_losses"],
+                  "val_history": history["val"]}
+        save_checkpoint(out_dir, ema, fields)
+        snap = snapshot_due(out_dir, tc.snapshot_every_s, budget_time(cfg, wall, cpu))
+        if snap is not None:
+            save_checkpoint(out_dir / SNAPSHOTS / f"{snap}-step{step:07d}", ema, fields)
         save_train_state(out_dir, {
             "model": module_state(model), "ema": module_state(ema), "optimizer": opt.state_dict(),
             "step": step, "wall_time_s": wall, "cpu_time_s": cpu,
@@ -314,6 +318,19 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
             break
     bar.close()
     return _summary(step, wall, history, out_dir, model, resumed_from)
+
+
+SNAPSHOTS = "snapshots"  # <train.out>/snapshots/kNNN-stepSSSSSSS: loadable checkpoint dirs
+
+
+def snapshot_due(out_dir: Path, every_s: float, used_s: float) -> str | None:
+    """The name prefix ``kNNN`` of the snapshot owed at ``used_s`` budget-clock seconds (snapshot N
+    covers N * every_s), or None if that one exists already or none is asked for. Read from the
+    folder, so a resumed run neither repeats nor skips one."""
+    if every_s <= 0 or used_s < every_s:
+        return None
+    k = f"k{int(used_s // every_s):03d}"
+    return None if any((out_dir / SNAPSHOTS).glob(f"{k}-step*")) else k
 
 
 @torch.no_grad()
