@@ -79,11 +79,12 @@ def read_policy_manifest(ckpt_dir: str | Path, env_name: str | None = None) -> d
     if have is None or (want is not None and have is not want):
         what = kind or manifest.get("model_kind") or "unknown"
         desc = f" ({OTHER_KINDS[what]})" if what in OTHER_KINDS else f" (the {label(have)})" if have else ""
+        for_env = f" for {env_name}" if env_name else ""
         wanted = f"a goal-conditioned {label(want)} (kind={want.kind!r})" if want else \
             f"a goal-conditioned policy (kind one of {sorted(BY_KIND)})"
         raise CheckpointError(
             f"{who}: {ckpt_dir} holds a checkpoint of kind {what!r}{desc}, not {wanted}; point policy.out to a dir "
-            f"written by jobs/train_policy.py{' for ' + env_name if env_name else ''}, or {train_fix(env_name or '<env>')}"
+            f"written by jobs/train_policy.py{for_env}, or {train_fix(env_name or '<env>')}"
         )
     trained_on = manifest.get("env")
     if env_name is not None and trained_on != env_name and not (

@@ -1,4 +1,4 @@
-"""Config of the goal-conditioned policy (ant, cube): ``policy.*`` (network, data, training) and ``reach.*`` (evaluation).
+"""Config of the goal-conditioned policy (ant, cube): ``policy.*`` (network, data, training), ``reach.*`` (its test).
 
 A config of its own, like the expert's (:mod:`fmctd_dist.ant.config`): the planner's config
 digest is recorded with every result row, and training a low-level policy must not change

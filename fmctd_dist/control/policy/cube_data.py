@@ -79,7 +79,8 @@ def load_cube_policy_data(cfg: Config, path: Path | None = None) -> tuple[CubeRo
         e, s = manifest["episodes"][split], manifest["episode_steps"]
         arrays = load_npz(path / f"{split}.npz", {"observations": (np.float32, (e, s, obs_dim)),
                                                   "actions": (np.float32, (e, s, ACT_DIM)),
-                                                  "qpos": (np.float32, (e, s, None)), "qvel": (np.float32, (e, s, None)),
+                                                  "qpos": (np.float32, (e, s, None)),
+                                                  "qvel": (np.float32, (e, s, None)),
                                                   "target_block": (np.int8, (e, s)),
                                                   "target_pos": (np.float32, (e, s, 3))},
                           f"it does not match {path / 'manifest.json'}; delete {path} and regenerate")

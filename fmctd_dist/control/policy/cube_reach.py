@@ -6,7 +6,7 @@ completed (the target cube ends within ``radius`` of the oracle's target), with 
 more than ``radius`` from where the pick-and-place left it:
 
 - the MuJoCo state (qpos, qvel) of the row is restored, with the env's target for that cube
-  set to the data's (so OGBench's oracle can be asked too);
+  set to the plan's end (so OGBench's oracle can be asked to go there too);
 - the *plan* is the target cube's recorded xyz from the row to the end of its pick-and-place;
   the policy gets the plan point ``offset`` (10) steps ahead as subgoal, moved on by
   ``offset`` each time the cube comes within ``advance`` of it (:class:`SubgoalTracker`, the
@@ -15,9 +15,11 @@ more than ``radius`` from where the pick-and-place left it:
   after some step, within ``max_steps`` env steps.
 
 References on the same tries: OGBench's ``CubePlanOracle`` (the data's own settings, noise 0.1,
-seeded), re-planned from the restored state to the data's target (it sees the target, not the
-plan, and needs ~90 steps for a whole pick-and-place), and zero actions (the arm holds still:
-the floor). Deterministic given the seed.
+seeded), re-planned from the restored state to the plan's end (it sees that target, not the
+plan; its keyframes start with an open gripper, so a carried cube is dropped and picked again;
+it needs ~90 steps for a whole pick-and-place), and zero actions (the arm holds still: the
+floor). Rates are also given apart for tries that start with the cube on the table (grasp,
+carry, place) and in the air (carry, place). Deterministic given the seed.
 """
 
 from __future__ import annotations
@@ -36,7 +38,7 @@ from fmctd_dist.control.policy.cube import cube_view
 
 Controller = Callable[[np.ndarray, np.ndarray], np.ndarray]  # (view [28], subgoal [3]) -> action [5]
 ROW_STREAM = 7  # SeedSequence([reach.seed, ROW_STREAM]) picks the rows
-ORACLE = "oracle"  # the controller name run as OGBench's CubePlanOracle (it needs the env, not a view)
+ON_TABLE_Z = 0.25  # obs units: a cube resting on the table has z = 0.2; above this it is lifted (or stacked)
 
 
 def reach_rows(rows: CubeRows, n: int, radius: float, seed: int) -> np.ndarray:
@@ -58,8 +60,8 @@ def zero_controller(view: np.ndarray, subgoal: np.ndarray) -> np.ndarray:
     return np.zeros(ACT_DIM)
 
 
-def restore(env, rows: CubeRows, i: int, cube: int, goal_quat: np.ndarray) -> tuple[np.ndarray, dict]:
-    """Put the env in row i's MuJoCo state, with the data's target for ``cube``; returns (obs, info)."""
+def restore(env, rows: CubeRows, i: int, cube: int, goal: np.ndarray, goal_quat: np.ndarray) -> tuple[np.ndarray, dict]:
+    """Put the env in row i's MuJoCo state, with ``cube``'s target at ``goal`` [3] (obs units); returns (obs, info)."""
     import mujoco
 
     u = env.unwrapped
@@ -68,7 +70,7 @@ def restore(env, rows: CubeRows, i: int, cube: int, goal_quat: np.ndarray) -> tu
     u._data.qvel[:] = rows.qvel[i]
     u._target_block = int(cube)
     for k, mocap in enumerate(u._cube_target_mocap_ids):
-        u._data.mocap_pos[mocap] = rows.target_pos[i] / XYZ_SCALE + XYZ_CENTER if k == cube else (0, 0, -0.3)
+        u._data.mocap_pos[mocap] = goal / XYZ_SCALE + XYZ_CENTER if k == cube else (0, 0, -0.3)
         u._data.mocap_quat[mocap] = goal_quat if k == cube else (1, 0, 0, 0)
     mujoco.mj_forward(u._model, u._data)  # site positions (the effector) and contacts of the restored state
     mujoco.mj_rnePostConstraint(u._model, u._data)
@@ -85,7 +87,7 @@ def try_once(env, name: str, controller: Controller | None, rows: CubeRows, i: i
     plan = rows.xyz[i:u + 1, c].astype(np.float64)  # [F, 3] the data's cube path
     goal = plan[-1]
     quat = rows.views[u, 22:26].astype(np.float64)  # the placed cube's orientation: the oracle's target yaw
-    ob, info = restore(env, rows, i, c, quat)
+    ob, info = restore(env, rows, i, c, goal, quat)
     tracker = SubgoalTracker(plan, offset, advance, dim=3)
     oracle = None
     if controller is None:
@@ -105,7 +107,7 @@ def try_once(env, name: str, controller: Controller | None, rows: CubeRows, i: i
         if d <= radius:
             hit = s
             break
-    return {"hit": hit, "d0": d0, "dmin": best, "plan_steps": len(plan) - 1}
+    return {"hit": hit, "d0": d0, "dmin": best, "plan_steps": len(plan) - 1, "on_table": bool(plan[0, 2] < ON_TABLE_Z)}
 
 
 def evaluate_reach(env_name: str, controllers: dict[str, Controller | None], rows: CubeRows, n: int, offset: int,
@@ -128,8 +130,13 @@ def evaluate_reach(env_name: str, controllers: dict[str, Controller | None], row
                         res.append(try_once(env, name, ctrl, rows, int(i), ncube, offset, advance, radius,
                                             max_steps, seed))
                 hits = [r["hit"] for r in res if r["hit"] is not None]
+                table = [r["hit"] is not None for r in res if r["on_table"]]
+                lifted = [r["hit"] is not None for r in res if not r["on_table"]]
                 out[name] = {"tries": len(res), "reach_rate": len(hits) / max(len(res), 1),
                              "mean_steps_to_reach": float(np.mean(hits)) if hits else None,
+                             "reach_rate_on_table": float(np.mean(table)) if table else None,
+                             "tries_on_table": len(table),  # the cube starts on the table: grasp + carry + place
+                             "reach_rate_lifted": float(np.mean(lifted)) if lifted else None,  # starts in the air
                              "mean_plan_steps": float(np.mean([r["plan_steps"] for r in res])),
                              "mean_start_dist": float(np.mean([r["d0"] for r in res])),
                              "mean_min_dist": float(np.mean([r["dmin"] for r in res])),
@@ -143,7 +150,11 @@ def evaluate_reach(env_name: str, controllers: dict[str, Controller | None], row
 def format_reach(name: str, r: dict[str, Any]) -> str:
     """One line of a reach result (job output)."""
     steps = "-" if r["mean_steps_to_reach"] is None else f"{r['mean_steps_to_reach']:.1f}"
+    split = "; ".join(f"{what} {r[key]:.1%}" for what, key in (("from the table", "reach_rate_on_table"),
+                                                                 ("from the air", "reach_rate_lifted"))
+                      if r[key] is not None)
     return (f"  {name:7s} reach {r['reach_rate']:.1%} (cube within {r['radius']} obs units = "
-            f"{r['radius'] / XYZ_SCALE:.2f} m of the plan's end in {r['max_steps']} steps), mean steps {steps}; "
+            f"{r['radius'] / XYZ_SCALE:.2f} m of the plan's end in {r['max_steps']} steps; {split}; "
+            f"{r['tries_on_table']} start on the table), mean steps {steps}; "
             f"{r['tries']} val rows, plan {r['mean_plan_steps']:.0f} steps, start dist {r['mean_start_dist']:.2f}, "
             f"closest {r['mean_min_dist']:.2f}")

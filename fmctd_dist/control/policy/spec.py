@@ -12,7 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-InputFn = Callable[[np.ndarray, np.ndarray, float], np.ndarray]  # (obs [..., obs_dim], subgoal [..., goal_dim], max_dist)
+# (obs [..., obs_dim], subgoal [..., goal_dim], max_subgoal_dist) -> network input [..., in_dim]
+InputFn = Callable[[np.ndarray, np.ndarray, float], np.ndarray]
 
 
 @dataclass(frozen=True)
