@@ -111,6 +111,29 @@ def test_ray_denoiser_matches_local_bitwise_when_the_ladder_renoises(prepared, p
     assert want.stats["model_calls"] == 2 * 5  # two micro-batches of 5, five rows down each
 
 
+def test_ray_denoiser_matches_local_bitwise_with_guidance_masks(prepared, pools):
+    """Object-wise guidance masks (issue 20) travel with the shards the pool cuts: 2 actors give the
+    local bits, and the masks act (flipping them changes the guided jobs)."""
+    cfg = prepared.cfg
+    local = LocalDenoiser.from_checkpoint(prepared.checkpoint, cfg)
+    rng = np.random.default_rng(2)
+    b, t, d = 11, cfg.n_tokens, cfg.token_dim
+    levels = np.repeat(np.linspace(50, 0, 4).astype(np.int64)[None, :, None], t, axis=2).repeat(b, axis=0)
+    levels[:, :, 0] = 0
+    mask = np.eye(2, dtype=np.float32)[np.arange(b) % 2]  # [B, 2]: guide x or y only
+    batch = DenoiseBatch(rng.standard_normal((b, t, d), dtype=np.float32), levels,
+                         np.tile(np.array([1.0, 2.0, 4.0], np.float32), 4)[:b],
+                         rng.standard_normal((b, 2), dtype=np.float32), rng.standard_normal((b, 2), dtype=np.float32),
+                         guide_mask=mask)
+    want = local.denoise(batch)
+    got = pools(2).denoiser().denoise(batch)
+    assert np.array_equal(got.x, want.x) and np.array_equal(got.x0, want.x0)
+    assert got.stats["micro_batches"] == 3
+    flipped = local.denoise(DenoiseBatch(batch.x, batch.levels, batch.scale, batch.start, batch.goal,
+                                         guide_mask=1.0 - mask))
+    assert not np.array_equal(flipped.x, want.x)
+
+
 def test_plan_identical_local_one_and_two_actors(prepared, pools):
     ref = local_plan(prepared)
     assert ref[0].status != "stay" and ref[0].expansions >= 24

@@ -87,6 +87,7 @@ class LocalDenoiser:
             None if mb.noise_seed is None else torch.as_tensor(mb.noise_seed, dtype=torch.long),
             self.guidance_path,
             self.compiled,
+            None if mb.guide_mask is None else torch.as_tensor(mb.guide_mask, dtype=torch.float32, device=dev),
         )
         x, x0 = x.cpu().numpy(), x0.cpu().numpy()  # waits for the device
         return x, x0, time.perf_counter() - t0
@@ -95,6 +96,9 @@ class LocalDenoiser:
         d = batch.x.shape[-1]
         if d != self.model.token_dim:
             raise ValueError(f"x has token dim {d} but the model expects {self.model.token_dim}")
+        if batch.guide_mask is not None and d % batch.guide_mask.shape[1]:
+            raise ValueError(f"guide_mask covers {batch.guide_mask.shape[1]} state dims, which do not divide "
+                             f"the token dim {d} into frames")
         lv = batch.levels
         if lv.size and (lv.min() < 0 or lv.max() > self.consts.levels):
             raise ValueError(f"levels must lie in [0, {self.consts.levels}], got [{lv.min()}, {lv.max()}]")

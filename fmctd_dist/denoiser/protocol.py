@@ -29,6 +29,8 @@ class DenoiseBatch:
     start:  [B, d] float32     start position, normalised (guidance target for the context)
     goal:   [B, d] float32     goal position, normalised (guidance target for plan frames)
     noise_seed: [B] int64 or None  per-job seed of the re-noising draws (None: no row may go up)
+    guide_mask: [B, d] float32 or None  per job, 1 on the frame-state dims the goal term of the
+            guidance uses (cubes: the chosen cube's xyz, object-wise guidance); None = every dim
     """
 
     x: np.ndarray
@@ -37,6 +39,7 @@ class DenoiseBatch:
     start: np.ndarray
     goal: np.ndarray
     noise_seed: np.ndarray | None = None
+    guide_mask: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         b, t, _ = self.x.shape
@@ -46,6 +49,9 @@ class DenoiseBatch:
         assert self.scale.shape == (b,), f"scale {self.scale.shape} != ({b},)"
         assert self.start.shape[0] == b and self.goal.shape[0] == b
         assert self.noise_seed is None or self.noise_seed.shape == (b,), f"noise_seed {self.noise_seed.shape} != ({b},)"
+        assert self.guide_mask is None or self.guide_mask.shape == self.goal.shape, (
+            f"guide_mask {self.guide_mask.shape} != goal {self.goal.shape}"
+        )
 
     @property
     def size(self) -> int:
@@ -54,7 +60,8 @@ class DenoiseBatch:
     def take(self, idx: np.ndarray | slice) -> "DenoiseBatch":
         """Sub-batch (used to cut micro-batches in job order)."""
         seed = None if self.noise_seed is None else self.noise_seed[idx]
-        return DenoiseBatch(self.x[idx], self.levels[idx], self.scale[idx], self.start[idx], self.goal[idx], seed)
+        mask = None if self.guide_mask is None else self.guide_mask[idx]
+        return DenoiseBatch(self.x[idx], self.levels[idx], self.scale[idx], self.start[idx], self.goal[idx], seed, mask)
 
 
 @dataclass
@@ -76,7 +83,10 @@ class Denoiser(Protocol):
 
 
 def concat_batches(batches: list[DenoiseBatch]) -> DenoiseBatch:
-    """Stack batches with possibly different R by padding levels with their last row."""
+    """Stack batches with possibly different R by padding levels with their last row.
+
+    A batch without a guidance mask joins masked ones with an all-ones mask, which the sampler
+    treats bit for bit like no mask."""
     r = max(b.levels.shape[1] for b in batches)
     levels = [pad_levels(b.levels, r) for b in batches]
     return DenoiseBatch(
@@ -87,6 +97,8 @@ def concat_batches(batches: list[DenoiseBatch]) -> DenoiseBatch:
         np.concatenate([b.goal for b in batches]),
         None if all(b.noise_seed is None for b in batches) else np.concatenate(
             [np.zeros(b.size, np.int64) if b.noise_seed is None else b.noise_seed for b in batches]),
+        None if all(b.guide_mask is None for b in batches) else np.concatenate(
+            [np.ones(b.goal.shape, np.float32) if b.guide_mask is None else b.guide_mask for b in batches]),
     )
 
 

@@ -69,11 +69,19 @@ def make_consts(cfg: DiffusionConfig, device: torch.device | str = "cpu") -> Sam
     ).to(device)
 
 
-def goal_reward(x0: torch.Tensor, start: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
+def goal_reward(x0: torch.Tensor, start: torch.Tensor, goal: torch.Tensor,
+                mask: torch.Tensor | None = None) -> torch.Tensor:
     """R = -mean_f w_f tanh(||xy_f - target_f|| / 2) per job, in normalised space.
 
     x0: [B, T, D] tokens (token 0 = context), start/goal: [B, d] -> R: [B]. Tokens un-stack
     into D/d frames of d numbers; context frames target ``start`` (w 20), plan frames ``goal`` (w 1).
+
+    ``mask`` [B, d] (object-wise guidance, reference §13): the plan frames' distance to the goal
+    counts only the masked dims (a cube job: its chosen cube's xyz), so the other cubes' goals
+    pull nothing. The start term keeps every dim: it is reconstruction guidance on the observed
+    frames, and every cube's current position is observed, so it anchors the un-guided cubes
+    where they are rather than steering any of them. Multiplying by 1.0 is exact in both passes,
+    so an all-ones mask gives the bits of ``mask=None``.
     """
     b, t, dim = x0.shape
     d = start.shape[-1]
@@ -82,14 +90,21 @@ def goal_reward(x0: torch.Tensor, start: torch.Tensor, goal: torch.Tensor) -> to
     target = torch.cat((start[:, None].expand(b, fs, d), goal[:, None].expand(b, (t - 1) * fs, d)), dim=1)
     w = torch.full((t * fs,), GOAL_WEIGHT, dtype=x0.dtype, device=x0.device)
     w[:fs] = START_WEIGHT
-    dist = torch.linalg.vector_norm(frames - target, dim=-1)  # [B, F]
+    diff = frames - target  # [B, F, d]
+    if mask is not None:
+        keep = torch.cat((torch.ones_like(mask)[:, None].expand(b, fs, d),
+                          mask[:, None].expand(b, (t - 1) * fs, d)), dim=1).to(diff.dtype)
+        diff = diff * keep
+    dist = torch.linalg.vector_norm(diff, dim=-1)  # [B, F]
     return -(w * torch.tanh(dist / 2)).mean(dim=1)
 
 
 def transition(model: nn.Module, c: SamplerConsts, x: torch.Tensor, a: torch.Tensor, b: torch.Tensor,
                scale: torch.Tensor, start: torch.Tensor, goal: torch.Tensor,
-               guidance_path: str = "input", force_grad: bool = False) -> tuple[torch.Tensor, torch.Tensor]:
-    """One DDIM step from levels a to b. x: [B, T, D]; a, b: [B, T] long; scale: [B].
+               guidance_path: str = "input", force_grad: bool = False,
+               guide_mask: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+    """One DDIM step from levels a to b. x: [B, T, D]; a, b: [B, T] long; scale: [B];
+    guide_mask: [B, d] or None (the dims the goal term uses, :func:`goal_reward`).
 
     Returns (x_next, x0_hat), both [B, T, D]; for guided jobs x0_hat is the guided x0'. Tokens
     with a == b (and token 0, the context, always) come back bit-identical; x0_hat of a clean
@@ -106,7 +121,7 @@ def transition(model: nn.Module, c: SamplerConsts, x: torch.Tensor, a: torch.Ten
         with torch.enable_grad():
             xg = x_in.detach().requires_grad_(True)
             x0 = model(xg, t_in) if guidance_path == "input" else model(xg, t_in, skip_grad=False)
-            objective = GUIDANCE_GAIN * scale * goal_reward(x0, start, goal)  # [B]
+            objective = GUIDANCE_GAIN * scale * goal_reward(x0, start, goal, guide_mask)  # [B]
             (grad,) = torch.autograd.grad(objective.sum(), xg)
         x0 = x0.detach()
     else:
@@ -149,10 +164,11 @@ def renoise_draws(seeds: torch.Tensor, row: int, shape: tuple[int, ...], device:
 def run_levels(model: nn.Module, c: SamplerConsts, x: torch.Tensor, levels: torch.Tensor, scale: torch.Tensor,
                start: torch.Tensor, goal: torch.Tensor, stats: dict | None = None,
                noise_seed: torch.Tensor | None = None, guidance_path: str = "input",
-               force_grad: bool = False) -> tuple[torch.Tensor, torch.Tensor]:
+               force_grad: bool = False, guide_mask: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
     """Run levels [B, R+1, T] (row r -> r+1 per transition) on x [B, T, D].
 
-    scale [B], start/goal [B, d], noise_seed [B] (needed only if some row goes up). Returns
+    scale [B], start/goal [B, d], noise_seed [B] (needed only if some row goes up), guide_mask
+    [B, d] or None (object-wise guidance: the dims the goal term uses). Returns
     (x, x0): the final tokens and, per job, the x0 estimate of that job's last DDIM transition
     that moved a token (x itself if none did), so a job's result does not depend on which
     other jobs share its micro-batch. Rows where no token of any job goes down skip the model
@@ -173,7 +189,7 @@ def run_levels(model: nn.Module, c: SamplerConsts, x: torch.Tensor, levels: torc
         if not active:
             continue
         x, x0_r = transition(model, c, x, levels[:, r], levels[:, r + 1], scale, start, goal, guidance_path,
-                             force_grad)
+                             force_grad, guide_mask)
         x0 = torch.where(down[:, r].any(dim=1)[:, None, None], x0_r, x0)
         calls += 1
     if stats is not None:
