@@ -6,7 +6,9 @@ moves the tokens whose level drops towards a target plan by the fraction of nois
 early tokens clean first, a finished schedule yields the target. The target is a straight
 line from start towards goal whose speed grows with the guidance scale and is perturbed
 by a hash of the job's input tokens, so different scales and different parents give
-different plans: scale 2 usually reaches the goal, scale <= 0.5 never does.
+different plans: scale 2 usually reaches the goal, scale <= 0.5 never does. A job with a
+guidance mask (object-wise guidance) moves its masked dims at that speed and the others at
+``drift`` times it, like a model whose guidance pulls one object while the rest wander.
 """
 
 from __future__ import annotations
@@ -47,8 +49,9 @@ class FakeDenoiser:
     plan stays at the start (speed 0), which ``barely_moves`` flags as a bad plan.
     """
 
-    def __init__(self, pos_dim: int = 2, stuck_prob: float = 0.0, time_per_job_s: float = 1e-3):
+    def __init__(self, pos_dim: int = 2, stuck_prob: float = 0.0, time_per_job_s: float = 1e-3, drift: float = 0.5):
         self.pos_dim = pos_dim
+        self.drift = drift
         self.stuck_prob = stuck_prob
         self.time_per_job_s = time_per_job_s
         self.batches: list[DenoiseBatch] = []
@@ -74,14 +77,18 @@ class FakeDenoiser:
         frac = np.minimum(1.0, u[None, :] * speed[:, None])  # [B, F]
         start = batch.start.astype(np.float64)[:, None, :]  # [B, 1, d]
         goal = batch.goal.astype(np.float64)[:, None, :]
-        pos = start + (goal - start) * frac[..., None]  # [B, F, d]
+        per_dim = frac[..., None]  # [B, F, 1]
+        if batch.guide_mask is not None:
+            per_dim = per_dim * np.where(batch.guide_mask > 0, 1.0, self.drift)[:, None, :]  # [B, F, d]
+        pos = start + (goal - start) * per_dim  # [B, F, d]
         tokens = pos.reshape(b, t - 1, dd)
         return np.concatenate([np.asarray(batch.x[:, :1], np.float64), tokens], axis=1)
 
     def denoise(self, batch: DenoiseBatch) -> DenoiseResult:
         # Copies: the caller may reuse its arrays after the call returns.
         arrays = (batch.x, batch.levels, batch.scale, batch.start, batch.goal)
-        batch = DenoiseBatch(*(np.array(a, copy=True) for a in arrays))
+        mask = None if batch.guide_mask is None else np.array(batch.guide_mask, copy=True)
+        batch = DenoiseBatch(*(np.array(a, copy=True) for a in arrays), guide_mask=mask)
         self.batches.append(batch)
         target = self.target(batch)
         x = np.asarray(batch.x, np.float64).copy()

@@ -2,9 +2,12 @@
 
 Sequential MCTD is K = 1; P-MCTD is K > 1 with virtual visits and redundancy-aware claims;
 the sparse variants only change the schedule/codec/checkpoint handed in, which this loop
-never inspects. Per iteration: serial selection -> deterministic node ids -> ONE batched
-expansion call -> ONE batched jumpy-simulation call (+ batched bad-plan retries) -> values
--> allocate nodes -> max backup -> early-stop check on the new nodes' own plans.
+never inspects. Env families differ only in what is handed in too: the action set (child
+slots: guidance scale + guided state dims, :mod:`search.actions`) and the plan value
+(:class:`search.value_rule.PlanValue`; mazes by default). Per iteration: serial selection ->
+deterministic node ids -> ONE batched expansion call -> ONE batched jumpy-simulation call
+(+ batched bad-plan retries) -> values -> allocate nodes -> max backup -> early-stop check on
+the new nodes' own plans.
 All randomness comes from ``plan_seed``: the slot choice from one per-plan generator, the
 initial noise of a depth-1 job from SeedSequence([plan_seed, node_id, attempt(, copy)]).
 """
@@ -21,9 +24,11 @@ import numpy as np
 from fmctd_dist.data.tokens import PlanCodec
 from fmctd_dist.denoiser.protocol import DenoiseBatch, Denoiser, pad_levels
 from fmctd_dist.diffusion.schedule import PyramidSchedule
+from fmctd_dist.search.actions import Actions, scale_actions
 from fmctd_dist.search.select import backup, open_slots, select_batch
 from fmctd_dist.search.tree import Assignment, Tree, add_nodes, assign_ids, empty_tree
-from fmctd_dist.search.value import ACHIEVED, NOT_REACHED, barely_moves, plan_values, truncate_at_goal
+from fmctd_dist.search.value import ACHIEVED, NOT_REACHED, barely_moves
+from fmctd_dist.search.value_rule import MazeValue, PlanValue
 
 if TYPE_CHECKING:  # config.py pulls in omegaconf; the search only needs the field names
     from fmctd_dist.config import MethodConfig
@@ -34,6 +39,7 @@ MAX_IDLE_BATCHES = 10_000  # consecutive batches without a job before the search
 # SearchResult.status values
 EARLY_STOP = "early_stop"  # a new node's own (expansion-end) plan reached the goal
 STATUS_ACHIEVED = "achieved"  # budget/time ran out; best simulated plan that reaches the goal
+STATUS_PARTIAL = "partial"  # budget/time ran out; best simulated plan with a value > 0 short of the goal (cubes)
 STATUS_NOT_REACHED = "not_reached"  # first non-warping simulated plan (value 0)
 STATUS_STAY = "stay"  # no usable plan: the start repeated
 
@@ -46,10 +52,10 @@ class SearchParams:
     virtual_weight: float = 1.0  # w: weight of virtual visits in UCT
     redundancy_aware: bool = True  # an empty slot can be claimed once per batch
     leaf_parallel: bool = False  # a selected child gets A virtual visits instead of 1
-    guidance_scales: tuple[float, ...] = (0.0, 0.1, 0.5, 1.0, 2.0)  # one child slot per scale
+    guidance_scales: tuple[float, ...] = (0.0, 0.1, 0.5, 1.0, 2.0)  # one child slot per scale (no actions given)
     budget: int = 500  # expansion jobs; no iteration starts at or above it
-    warp_threshold: float = 2.0  # world units per plan frame
-    goal_radius: float = 2.0  # world units
+    warp_threshold: float = 2.0  # world units per plan frame (the default maze value rule)
+    goal_radius: float = 2.0  # world units (the default maze value rule)
     bad_plan_tries: int = 10  # retries (after attempt 0) for plans that barely move
     bad_plan_step: float = 0.1  # "barely moves": every step below this (world units)
     uct_c: float = math.sqrt(2.0)
@@ -142,14 +148,15 @@ class _Runner:
         self.denoiser, self.start_n, self.goal_n, self.clock = denoiser, start_n, goal_n, clock
         self.calls, self.time_s, self.call_s, self.retries = 0, 0.0, 0.0, 0
 
-    def __call__(self, x: np.ndarray, levels: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    def __call__(self, x: np.ndarray, levels: np.ndarray, acts: Actions) -> np.ndarray:
         b = x.shape[0]
         batch = DenoiseBatch(
             x=np.ascontiguousarray(x, np.float32),
             levels=levels,
-            scale=scale.astype(np.float32),
+            scale=acts.scale.astype(np.float32),
             start=np.repeat(self.start_n[None], b, 0),
             goal=np.repeat(self.goal_n[None], b, 0),
+            guide_mask=None if acts.mask is None else np.ascontiguousarray(acts.mask, np.float32),
         )
         t0 = self.clock()
         res = self.denoiser.denoise(batch)
@@ -162,24 +169,26 @@ class _Runner:
 
 
 class _Fallbacks:
-    """What to return if no early stop: best ACHIEVED > first NOT_REACHED > stay (reference §3.9)."""
+    """What to return if no early stop: best ACHIEVED (or, for rules with partial credit, best
+    value > 0) > first NOT_REACHED > stay (reference §3.9). For the maze rule value > 0 iff ACHIEVED."""
 
-    def __init__(self, goal: np.ndarray):
-        self.goal = goal
-        self.best: tuple[float, np.ndarray] | None = None  # (value, truncated plan + goal)
+    def __init__(self, goal: np.ndarray, rule: PlanValue):
+        self.goal, self.rule = goal, rule
+        self.best: tuple[float, np.ndarray, bool] | None = None  # (value, output plan, achieved)
         self.not_reached: np.ndarray | None = None  # [F', d] first non-warping plan
 
     def add(self, plans: np.ndarray, values: np.ndarray, status: np.ndarray, reach_t: np.ndarray) -> None:
         """Per-job results in job order; earlier jobs win ties."""
         for j in range(plans.shape[0]):
-            if status[j] == ACHIEVED and (self.best is None or values[j] > self.best[0]):
-                self.best = (float(values[j]), truncate_at_goal(plans[j], int(reach_t[j]), self.goal))
+            if (status[j] == ACHIEVED or values[j] > 0) and (self.best is None or values[j] > self.best[0]):
+                self.best = (float(values[j]), self.rule.output(plans[j], int(reach_t[j]), self.goal),
+                             bool(status[j] == ACHIEVED))
             elif status[j] == NOT_REACHED and self.not_reached is None:
-                self.not_reached = plans[j, :-1].astype(np.float32)  # last frame is the dummy
+                self.not_reached = self.rule.output(plans[j], -1, self.goal)
 
     def pick(self, start: np.ndarray, frames: int) -> tuple[str, float, np.ndarray]:
         if self.best is not None:
-            return STATUS_ACHIEVED, self.best[0], self.best[1]
+            return STATUS_ACHIEVED if self.best[2] else STATUS_PARTIAL, self.best[0], self.best[1]
         if self.not_reached is not None:
             return STATUS_NOT_REACHED, 0.0, self.not_reached
         return STATUS_STAY, 0.0, np.repeat(start[None].astype(np.float32), max(frames, 1), axis=0)
@@ -194,18 +203,28 @@ def search(
     params: SearchParams,
     plan_seed: int,
     *,
+    actions: Actions | None = None,
+    value: PlanValue | None = None,
     clock: Callable[[], float] = time.perf_counter,
 ) -> SearchResult:
-    """Plan from ``start`` [d] to ``goal`` [d] (world units); see the module docstring."""
+    """Plan from ``start`` [d] to ``goal`` [d] (world units); see the module docstring.
+
+    ``actions``: the child slots (default: one per ``params.guidance_scales``, every dim
+    guided). ``value``: the plan value rule (default: the maze's, with ``params.warp_threshold``
+    and ``params.goal_radius``); it also decides the early stop and the returned plan.
+    """
     t0 = clock()
     start = np.asarray(start, np.float64).reshape(-1)
     goal = np.asarray(goal, np.float64).reshape(-1)
     d = start.shape[0]
-    scales = np.asarray(params.guidance_scales, np.float32)  # [A]
+    acts = scale_actions(params.guidance_scales) if actions is None else actions  # [A] child slots
+    rule: PlanValue = MazeValue(params.warp_threshold, params.goal_radius) if value is None else value
+    if acts.mask is not None and acts.mask.shape[1] != d:
+        raise ValueError(f"action masks cover {acts.mask.shape[1]} state dims but the start has {d}")
     p_tokens = schedule.plan_tokens
     frames = p_tokens * codec.frame_stack
     k = int(params.parallel)
-    tree = empty_tree(1 + params.budget + k, scales.shape[0], p_tokens + 1, codec.frame_stack * d,
+    tree = empty_tree(1 + params.budget + k, acts.size, p_tokens + 1, codec.frame_stack * d,
                       frames, schedule.terminal_depth, d)
     rng = np.random.default_rng(np.random.SeedSequence([plan_seed, SELECT_TAG]))
     ctx = codec.context(start[None])[0]  # [1, D]
@@ -220,14 +239,14 @@ def search(
                                       (p_tokens, x.shape[2]), params.clip_noise)
                 x[b] = np.concatenate([ctx, noise])
         levels = stack_levels([schedule.expansion(int(dd)) for dd in depth])
-        return run(x, levels, scales[asg.slot[idx]])
+        return run(x, levels, acts.take(asg.slot[idx]))
 
     def simulate(asg: Assignment, idx: np.ndarray, x: np.ndarray) -> np.ndarray:
         depth = tree.depth[asg.parent[idx]] + 1
         levels = stack_levels([schedule.simulation(int(dd)) for dd in depth])
-        return run(x, levels, scales[asg.slot[idx]])
+        return run(x, levels, acts.take(asg.slot[idx]))
 
-    fallback = _Fallbacks(goal)
+    fallback = _Fallbacks(goal, rule)
     early: tuple[float, np.ndarray] | None = None
     stats: list[IterStats] = []
     expansions = iterations = resampled = idle = 0
@@ -255,7 +274,8 @@ def search(
         attempt = np.zeros(asg.size, np.int64)  # [J]
         ex_x = expand(asg, jobs, attempt)  # [J, T, D]
         sim_x = simulate(asg, jobs, ex_x)  # [J, T, D]
-        plans = codec.decode(sim_x)  # [J, F, d]
+        job_acts = acts.take(asg.slot)  # [J] actions in job order
+        plans = rule.prepare(codec.decode(sim_x), start, job_acts)  # [J, F, d]
         # Retries only for depth-1 jobs: deeper expansions are a pure function of the parent.
         bad = barely_moves(plans, params.bad_plan_step) & (tree.depth[asg.parent] == 0)  # [J]
         n_resampled = 0
@@ -266,10 +286,10 @@ def search(
             attempt[redo] = a
             ex_x[redo] = expand(asg, redo, attempt)
             sim_x[redo] = simulate(asg, redo, ex_x[redo])
-            plans[redo] = codec.decode(sim_x[redo])
+            plans[redo] = rule.prepare(codec.decode(sim_x[redo]), start, job_acts.take(redo))
             bad[redo] = barely_moves(plans[redo], params.bad_plan_step)
             n_resampled += redo.size
-        values, status, reach_t = plan_values(plans, start, goal, params.warp_threshold, params.goal_radius)
+        values, status, reach_t = rule.values(plans, start, goal, job_acts)
         fallback.add(plans, values, status, reach_t)
         add_nodes(tree, asg, ex_x, values, status, plans, attempt, iterations)
         backup(tree, asg.parent)
@@ -277,11 +297,12 @@ def search(
         resampled += n_resampled
         if params.early_stop:
             new = asg.new_nodes
-            own = codec.decode(tree.x[new])  # [U, F, d] expansion-end plans
-            ev, es, et = plan_values(own, start, goal, params.warp_threshold, params.goal_radius)
+            new_acts = acts.take(tree.slot[new])
+            own = rule.prepare(codec.decode(tree.x[new]), start, new_acts)  # [U, F, d] expansion-end plans
+            ev, es, et = rule.values(own, start, goal, new_acts)
             if np.any(es == ACHIEVED):
                 i = int(np.argmax(np.where(es == ACHIEVED, ev, -1.0)))  # earliest reach, lowest id
-                early = (float(ev[i]), truncate_at_goal(own[i], int(et[i]), goal))
+                early = (float(ev[i]), rule.output(own[i], int(et[i]), goal))
         stats.append(IterStats(iterations, asg.size, int(asg.new_nodes.shape[0]), cand.attempts, cand.wasted,
                                n_resampled, run.calls - calls0, run.time_s - time0, float(tree.value[0]),
                                clock() - it_t0))

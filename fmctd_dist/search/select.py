@@ -20,7 +20,7 @@ class Candidates(NamedTuple):
     """Output of one selection batch, in selection order."""
 
     parents: np.ndarray  # [J] int32, node whose slot was claimed
-    slots: np.ndarray  # [J] int32, claimed slot (guidance-scale index)
+    slots: np.ndarray  # [J] int32, claimed slot (action index)
     attempts: int  # descents run (<= K)
     wasted: int  # descents that ended with nothing to claim
 

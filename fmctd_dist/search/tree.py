@@ -21,13 +21,13 @@ NO_STATUS = -1  # status of the root and of unused rows (value.py statuses are >
 
 @dataclass
 class Tree:
-    """Search tree with capacity N nodes, A children per node (one per guidance scale).
+    """Search tree with capacity N nodes, A children per node (one per action, search.actions).
 
     Mutated in place by select.py (virtual, claimed), by :func:`add_nodes` and by backup.
     """
 
     parent: np.ndarray  # [N] int32, parent node id (EMPTY for the root)
-    slot: np.ndarray  # [N] int32, child index under the parent = guidance-scale index (EMPTY for the root)
+    slot: np.ndarray  # [N] int32, child index under the parent = action index (EMPTY for the root)
     depth: np.ndarray  # [N] int32, tree depth (root 0); depth d ran pyramid segment d
     children: np.ndarray  # [N, A] int32, child node id per slot or EMPTY
     visits: np.ndarray  # [N] int32, backups that walked through the node (new leaves: 0)
