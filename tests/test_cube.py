@@ -323,3 +323,27 @@ def test_cube_plan_rules_on_hand_made_plans():
     assert r["lift"]["supported_end"] == 0 and r["lift"]["moved"] == 1
     assert r["both"]["one_mover"] == 0 and r["both"]["supported_end"] == 1
     assert r["jump"]["no_warp"] == 0 and r["jump"]["max_step"] > 1.0
+
+
+def test_quality_curve_job_on_cube_snapshots(tiny_cube, tmp_path, capsys):
+    """jobs/quality_curve.py measures each snapshot once (cached by digest) and draws the curve."""
+    import importlib.util
+
+    from fmctd_dist.config import REPO_ROOT
+    from fmctd_dist.data.registry import load_family_dataset
+    from fmctd_dist.data.windows import train_data
+    from fmctd_dist.diffusion.train import train
+
+    _, path, _ = tiny_cube
+    cfg = tiny_cfg(path.parent, "cube-single", "model.width=32", "model.layers=1", "model.heads=2", "model.ff=64",
+                   "train.max_steps=4", "train.batch_size=4", "train.val_batches=1", "train.warmup=1", "jump=5",
+                   "train.ckpt_every=2", "train.snapshot_every_s=1e-9")
+    train(cfg, train_data(cfg, load_family_dataset(cfg)), tmp_path / "run", progress=False)
+    spec = importlib.util.spec_from_file_location("quality_curve", REPO_ROOT / "jobs" / "quality_curve.py")
+    job = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(job)
+    rows = job.points(tmp_path / "run")
+    assert [r["steps"] for _, r in rows] == [2, 4] and all(0 <= r["unguided_no_warp"] <= 1 for _, r in rows)
+    assert all((tmp_path / "run" / "snapshots" / name / "quality.json").exists() for name, _ in rows)
+    assert job.main([str(tmp_path / "run"), "--plot", str(tmp_path / "curve.png")]) == 0
+    assert "| k" in capsys.readouterr().out and (tmp_path / "curve.png").stat().st_size > 1000
