@@ -31,11 +31,12 @@ from fmctd_dist.denoiser.local import LocalDenoiser
 from fmctd_dist.diffusion.checkpoint import load_checkpoint, normaliser_from_manifest
 from fmctd_dist.evaluation.plan_quality import boundary_and_inside, sample_plans
 from fmctd_dist.families import require_family
+from fmctd_dist.search.cube_value import LEVEL, TABLE_Z, CubeValue
 
-TABLE_Z = 0.2  # obs units: a cube resting on the table (reference.md §13)
-STACK_DZ = 0.4  # obs units: one stack level
-SUPPORT_TOL = 0.15  # |z - support height| still counted as resting (the data's resting cubes: within ~0.1)
-STACK_XY = 0.3  # obs units: xy offset of a cube still resting on the one below (cube width 0.4)
+# the search's own support rule (search/cube_value.py), so the table measures what the value will demand
+STACK_DZ = LEVEL
+SUPPORT_TOL = CubeValue.support_tol
+STACK_XY = CubeValue.stack_xy
 MOVED = 1.0  # obs units (0.1 m): a cube that ends this far from its start was moved by the plan
 N_STARTS = 100
 
