@@ -32,6 +32,9 @@ VISUAL_PLANNER_ISSUE = "issue 21"  # where the visual planner (VAE, inverse dyna
 # Families whose planner is not built yet: load_config refuses them unless the job names them
 # (jobs/render_frames.py does), so train / eval stop with one ConfigError before any work.
 PENDING_FAMILIES = ("visual-pointmaze", "cube")  # cube: jobs/make_dataset.py and jobs/train.py serve it
+# Each family's hook module (fmctd_dist.hooks.FamilyHooks): its plan rules (the tree's actions and
+# value) and its episodes. Named, not imported, so this registry stays below everything.
+HOOKS = {"pointmaze": "fmctd_dist.hooks.maze", "antmaze": "fmctd_dist.hooks.maze", "cube": "fmctd_dist.hooks.cube"}
 
 
 @dataclass(frozen=True)

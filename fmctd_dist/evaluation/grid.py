@@ -17,10 +17,10 @@ from fmctd_dist.config import Config, git_sha
 from fmctd_dist.device import resolve_device, set_threads
 from fmctd_dist.diffusion.checkpoint import read_manifest, verify_checkpoint
 from fmctd_dist.errors import ResultsError
-from fmctd_dist.evaluation.controllers import check_controller, controller_factory
-from fmctd_dist.evaluation.episode import describe, run_episode
+from fmctd_dist.evaluation.episode import describe
 from fmctd_dist.evaluation.identity import config_hash, differences, identity_columns
 from fmctd_dist.evaluation.results import ResultStore
+from fmctd_dist.hooks import hooks_for
 
 
 @dataclass(frozen=True)
@@ -36,7 +36,7 @@ class Prepared:
 
 
 def prepare(cfg: Config) -> Prepared:
-    check_controller(cfg)  # AntMaze: the low-level policy exists and was trained for this maze
+    hooks_for(cfg.env.name).check_episodes(cfg)  # e.g. the ant's or the arm's low-level policy exists and fits
     device = str(resolve_device(cfg.device))
     ckpt = cfg.checkpoint_dir()
     manifest = verify_checkpoint(ckpt, cfg)  # exists, well-typed, agrees with env/jump/model/n_tokens, sha256
@@ -88,7 +88,6 @@ def run_local(p: Prepared, store: ResultStore, progress: bool = True,
     """All missing episodes of the grid in this process (LocalDenoiser, no Ray)."""
     from fmctd_dist.denoiser.local import LocalDenoiser
     from fmctd_dist.diffusion.checkpoint import normaliser_from_manifest
-    from fmctd_dist.envs import make_env
     from fmctd_dist.planners import make_planner
 
     cfg = p.cfg
@@ -99,12 +98,11 @@ def run_local(p: Prepared, store: ResultStore, progress: bool = True,
     denoiser = LocalDenoiser.from_checkpoint(p.checkpoint, cfg, expect_digest=p.checkpoint_digest)
     manifest = read_manifest(p.checkpoint)
     planner = make_planner(cfg, denoiser, normaliser_from_manifest(manifest), cfg.eval.episode_time_limit)
-    env = make_env(cfg.env.name, cfg.env.protocol)
-    make_controller = controller_factory(cfg)
+    episodes = hooks_for(cfg.env.name).episodes(cfg)  # the family's env + controller, built once
     rows = []
     bar = tqdm(todo, desc=f"{cfg.method.name} {cfg.env.name}", unit="ep", disable=not progress)
     for task, seed in bar:
-        row = {**run_episode(cfg, env, planner, task, seed, make_controller=make_controller), **provenance(p, 0)}
+        row = {**episodes.run(planner, task, seed), **provenance(p, 0)}
         store.write(row)
         rows.append(row)
         bar.set_postfix(success=f"{sum(r['success'] for r in rows)}/{len(rows)}")

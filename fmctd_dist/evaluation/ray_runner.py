@@ -103,22 +103,18 @@ class _DriverPlanner:
 
 @ray.remote(num_cpus=0)
 class EnvActor:
-    """Runs whole episodes (env + controller: PD, or the ant's policy) and returns their rows; prints nothing."""
+    """Runs whole episodes (the env family's env + controller) and returns their rows; prints nothing."""
 
     def __init__(self, prepared: Prepared, driver):
-        from fmctd_dist.envs import make_env
-        from fmctd_dist.evaluation.controllers import controller_factory
+        from fmctd_dist.hooks import hooks_for
 
         _one_thread()
         self.cfg = prepared.cfg
-        self.env = make_env(self.cfg.env.name, self.cfg.env.protocol)
-        self.make_controller = controller_factory(self.cfg)
+        self.episodes = hooks_for(self.cfg.env.name).episodes(self.cfg)  # the family's env + controller
         self.planner = _DriverPlanner(driver)
 
     def run(self, task: int, seed: int) -> dict[str, Any]:
-        from fmctd_dist.evaluation.episode import run_episode
-
-        return run_episode(self.cfg, self.env, self.planner, task, seed, make_controller=self.make_controller)
+        return self.episodes.run(self.planner, task, seed)
 
     def info(self) -> dict[str, Any]:
         """Where this env actor runs: pid and Ray node id (what a fault test kills)."""

@@ -2,7 +2,8 @@
 
 K (``method.parallel``), w, RAS, leaf parallelisation and H (``jump``, which also picks the
 sparse checkpoint) are config; this class only wires the schedule, codec and denoiser into
-:func:`fmctd_dist.search.search` and expands a sparse plan to one waypoint per env step.
+:func:`fmctd_dist.search.search`, with the action set and plan value the env family gives for
+each call (:func:`fmctd_dist.hooks.hooks_for`), and expands a sparse plan to one waypoint per env step.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from fmctd_dist.control.pd import repeat_waypoints
 from fmctd_dist.data.tokens import Normaliser, PlanCodec
 from fmctd_dist.denoiser.protocol import Denoiser
 from fmctd_dist.diffusion.schedule import PyramidSchedule
+from fmctd_dist.hooks import hooks_for
 from fmctd_dist.planners.base import PlanOutput
 from fmctd_dist.search.loop import SearchParams, search
 
@@ -28,12 +30,15 @@ class MCTDPlanner:
         self.schedule = PyramidSchedule(cfg.plan_tokens, cfg.diffusion.levels, m.segment_transitions, m.sim_skip)
         self.codec = PlanCodec(normaliser, cfg.model.frame_stack)
         self.params = SearchParams.from_method(m, time_limit_s=time_limit_s, clip_noise=cfg.diffusion.clip_noise)
+        self.rules = hooks_for(cfg.env.name).plan_rules(cfg)
         self.last_result = None  # the SearchResult of the last call (tree, per-iteration stats)
 
     def plan(self, start: np.ndarray, goal: np.ndarray, seed: int) -> PlanOutput:
         t0 = time.perf_counter()
-        r = search(self.denoiser, self.schedule, self.codec, np.asarray(start, np.float64),
-                   np.asarray(goal, np.float64), self.params, seed)
+        start, goal = np.asarray(start, np.float64), np.asarray(goal, np.float64)
+        actions, value = self.rules.tree(start, goal)
+        r = search(self.denoiser, self.schedule, self.codec, start, goal, self.params, seed,
+                   actions=actions, value=value)
         self.last_result = r
         return PlanOutput(
             waypoints=repeat_waypoints(r.plan, self.cfg.jump),

@@ -1,0 +1,150 @@
+"""One cube episode (reference §13): plan cube paths, script the arm between segments, let the policy carry.
+
+Per segment:
+1. plan from the current cube xyz [3N] (obs units) to the goal;
+2. the target cube = the unsolved cube whose planned path is longest;
+3. on a new segment (the first plan, after a release, or when the target changes) the scripted
+   pre-position: ~30 steps moving the open gripper above the target's first planned position;
+4. the low-level policy carries the target: its subgoal is the target's planned position 10
+   steps ahead, advanced when the cube comes within 1.0 (:class:`control.subgoal.SubgoalTracker`);
+5. when the target is within 0.2 of its goal the scripted release (10 steps lift while opening,
+   20 steps away in +x) ends the segment; so does reaching the plan's end, or, for methods that
+   replan, ``env.replan_every`` policy steps (``method.replan_every`` when that is 0).
+Stops at OGBench's success (every cube within 0.04 m of its goal) or ``env.max_steps``. Like the
+maze episode, a pure function of (config, checkpoints, task, seed).
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any, Callable
+
+import numpy as np
+
+from fmctd_dist.config import Config
+from fmctd_dist.control.cube_scripts import EFFECTOR, PrePosition, Release
+from fmctd_dist.control.policy.cube import cube_view
+from fmctd_dist.control.subgoal import SubgoalTracker
+from fmctd_dist.envs.cube import CubeEpisodes
+from fmctd_dist.evaluation.cube_failures import why_failed
+from fmctd_dist.planners.base import Planner, plan_seed
+from fmctd_dist.search.cube_value import CubeValue
+
+CubePolicy = Callable[[np.ndarray, np.ndarray], np.ndarray]  # (view [28], subgoal [3]) -> action [5]
+
+RELEASE_RADIUS = 0.2  # obs units: the target this close to its goal is released
+SUBGOAL_AHEAD = 10  # env steps of plan between the cube and its subgoal
+SUBGOAL_RADIUS = 1.0  # obs units: the subgoal advances when the cube is this close
+
+
+def choose_target(plan: np.ndarray, state: np.ndarray, unsolved: list[int]) -> int:
+    """The unsolved cube whose planned path (from ``state`` [N, 3] through ``plan`` [F, N, 3]) is longest."""
+    path = np.concatenate([state[None], plan])  # [F+1, N, 3]
+    length = np.linalg.norm(np.diff(path, axis=0), axis=-1).sum(0)  # [N]
+    return int(max(unsolved, key=lambda i: (length[i], -i)))
+
+
+def replan_interval(cfg: Config) -> int:
+    """Policy steps per plan for methods that replan (0 = follow each plan to its end)."""
+    if cfg.method.replan_every <= 0:
+        return 0
+    return cfg.env.replan_every or cfg.method.replan_every
+
+
+def run_cube_episode(cfg: Config, env: CubeEpisodes, planner: Planner, policy: CubePolicy, task: int, seed: int,
+                     time_limit_s: float | None = None) -> dict[str, Any]:
+    """Run one episode; return its row (without the run-level provenance fields)."""
+    limit = cfg.eval.episode_time_limit if time_limit_s is None else time_limit_s
+    t_episode = time.perf_counter()
+    reset = env.reset(task, seed)
+    obs, goal, n = reset.obs, reset.goal, env.n_cubes
+    goal_c = goal.reshape(n, 3)
+    rules = CubeValue()
+    every = replan_interval(cfg)
+    cubes, effector, targets = [env.state(obs)], [obs[EFFECTOR]], []
+    steps, success, timed_out = 0, False, False
+    plan_time = denoise_time = call_time = 0.0
+    expansions = iterations = retries = n_plans = releases = 0
+    statuses, chosen, first_plan = [], [], None
+    last_target = -1
+
+    def step(action: np.ndarray, target: int) -> None:
+        nonlocal obs, success, steps
+        obs, success = env.step(action)
+        steps += 1
+        cubes.append(env.state(obs))
+        effector.append(obs[EFFECTOR])
+        targets.append(target)
+
+    def script(motion: PrePosition | Release) -> None:
+        for k in range(motion.steps):
+            if success or steps >= cfg.env.max_steps:
+                return
+            step(motion.act(obs, k), -1)
+
+    while steps < cfg.env.max_steps and not success:
+        state = env.state(obs)
+        out = planner.plan(state, goal, plan_seed(cfg.seed, task, seed, n_plans))
+        n_plans += 1
+        plan_time += out.plan_time_s
+        denoise_time += out.denoise_time_s
+        call_time += out.denoise_call_s
+        expansions, iterations = expansions + out.expansions, iterations + out.iterations
+        retries += out.retries
+        statuses.append(out.status)
+        plan = np.asarray(out.waypoints, np.float64).reshape(-1, n, 3)  # [F, N, 3] one per env step
+        first_plan = plan if first_plan is None else first_plan
+        if out.timed_out or (limit and plan_time > limit):
+            timed_out = True
+            break
+        unsolved = rules.unsolved(state, goal) or list(range(n))
+        target = choose_target(plan, state.reshape(n, 3), unsolved)
+        chosen.append(target)
+        if target != last_target:
+            script(PrePosition(plan[0, target]))
+            last_target = target
+        tracker = SubgoalTracker(plan[:, target], SUBGOAL_AHEAD, SUBGOAL_RADIUS, dim=3)
+        k = 0
+        while not success and steps < cfg.env.max_steps and (every == 0 or k < every):
+            cube = env.state(obs).reshape(n, 3)[target]
+            if k > 0 and np.linalg.norm(cube - goal_c[target]) < RELEASE_RADIUS:
+                script(Release())
+                releases += 1
+                last_target = -1  # the next segment starts with a pre-position
+                break
+            subgoal = tracker.update(cube)
+            if tracker.done and np.linalg.norm(cube - subgoal) < SUBGOAL_RADIUS and k >= SUBGOAL_AHEAD:
+                break  # the plan is used up without a placement: plan the next segment
+            step(np.asarray(policy(cube_view(obs, target), subgoal), np.float64), target)
+            k += 1
+    traj = np.asarray(cubes, np.float32)  # [T+1, 3N]
+    success = bool(success and not timed_out)
+    return {
+        "method": cfg.method.name,
+        "env": cfg.env.name,
+        "task": int(task),
+        "seed": int(seed),
+        "success": success,
+        "timed_out": timed_out,
+        "env_steps": steps,
+        "plan_time_s": plan_time,
+        "denoise_time_s": denoise_time,
+        "overhead_s": plan_time - denoise_time,
+        "denoise_share": denoise_time / plan_time if plan_time > 0 else 0.0,
+        "denoise_call_s": call_time,
+        "call_share": call_time / plan_time if plan_time > 0 else 0.0,
+        "expansions": expansions,
+        "iterations": iterations,
+        "retries": retries,
+        "plans": n_plans,
+        "plan_status": ",".join(statuses),
+        "episode_time_s": time.perf_counter() - t_episode,
+        "n_cubes": n,
+        "targets": ",".join(str(t) for t in chosen),  # the target cube of each plan
+        "releases": releases,
+        "why_failed": why_failed(traj.reshape(-1, n, 3), np.asarray(targets, np.int64), goal_c, success, timed_out),
+        "goal_cubes": goal.astype(np.float32).tolist(),  # [3N]
+        "plan_cubes": np.asarray(first_plan, np.float32).reshape(-1).tolist(),  # [F * 3N], the first plan
+        "traj_cubes": traj.reshape(-1).tolist(),  # [(T+1) * 3N] cube xyz per step, obs units
+        "traj_effector": np.asarray(effector, np.float32).reshape(-1).tolist(),  # [(T+1) * 3]
+    }

@@ -1,0 +1,60 @@
+"""What a planner and an evaluation runner ask of an env family, in one place per family (design §12).
+
+A family differs in the tree's action set and plan value (mazes: guidance scales + the reach
+value; cubes: (unsolved cube, scale) pairs + the cube rules) and in how an episode is driven
+(PD or ant policy on waypoints; the arm's pre-defined plans + the cube policy). Planners,
+``evaluation/grid.py`` and ``evaluation/ray_runner.py`` ask :func:`hooks_for` and never branch
+on the family. The module of each family is named in :data:`fmctd_dist.families.HOOKS` and
+imported by name, so nothing below the hooks imports them.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any, Protocol
+
+import numpy as np
+
+from fmctd_dist.families import HOOKS, family, require_family
+
+if TYPE_CHECKING:
+    from fmctd_dist.config import Config
+    from fmctd_dist.planners.base import Planner
+    from fmctd_dist.search.actions import Actions
+    from fmctd_dist.search.value_rule import PlanValue
+
+
+class PlanRules(Protocol):
+    """The search's inputs that depend on the family, for one plan call from ``start`` to ``goal`` [d]."""
+
+    def tree(self, start: np.ndarray, goal: np.ndarray) -> tuple["Actions", "PlanValue"]:
+        """The tree's child slots and the plan value (MCTD family)."""
+        ...
+
+    def fixed(self, start: np.ndarray, goal: np.ndarray) -> tuple["Actions", "PlanValue"]:
+        """One action (the fixed guidance of Diffuser / Diffusion Forcing) and the rule whose ``prepare``
+        turns the sampled plan into the one the controller follows."""
+        ...
+
+
+class Episodes(Protocol):
+    """An env (+ its controller) that runs whole episodes and returns their rows."""
+
+    def run(self, planner: "Planner", task: int, seed: int) -> dict[str, Any]: ...
+
+
+class FamilyHooks(Protocol):
+    def plan_rules(self, cfg: "Config") -> PlanRules: ...
+
+    def check_episodes(self, cfg: "Config") -> None:
+        """Everything an episode needs besides the planner checkpoint (e.g. a low-level policy): one
+        clear error in the job process, before any actor starts."""
+        ...
+
+    def episodes(self, cfg: "Config") -> Episodes: ...
+
+
+def hooks_for(env_name: str) -> FamilyHooks:
+    """The hook module of ``env_name``'s family (an unknown name or a family without hooks: one ConfigError)."""
+    require_family(env_name, tuple(HOOKS), "the planner and episode runner")
+    return importlib.import_module(HOOKS[family(env_name)])  # type: ignore[return-value]

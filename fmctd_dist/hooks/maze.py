@@ -1,0 +1,64 @@
+"""Maze hooks (PointMaze, AntMaze): guidance scales + the reach value; PD or ant-policy episodes.
+
+The actions and value are exactly what the search used before they were handed in
+(``scale_actions(method.guidance_scales)``, ``MazeValue(warp_threshold, goal_radius)``), so maze
+batches, trees and plans are bitwise those of the old defaults.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from fmctd_dist.config import Config
+from fmctd_dist.planners.base import Planner
+from fmctd_dist.search.actions import Actions, scale_actions
+from fmctd_dist.search.value_rule import MazeValue
+
+
+@dataclass(frozen=True)
+class MazeRules:
+    scales: tuple[float, ...]  # the tree's guidance scales (method.guidance_scales)
+    fixed_scale: float  # method.guidance_scale of planners without search
+    value: MazeValue
+
+    def tree(self, start: np.ndarray, goal: np.ndarray) -> tuple[Actions, MazeValue]:
+        return scale_actions(self.scales), self.value
+
+    def fixed(self, start: np.ndarray, goal: np.ndarray) -> tuple[Actions, MazeValue]:
+        return scale_actions([self.fixed_scale]), self.value
+
+
+def plan_rules(cfg: Config) -> MazeRules:
+    m = cfg.method
+    return MazeRules(tuple(float(s) for s in m.guidance_scales), float(m.guidance_scale),
+                     MazeValue(float(m.warp_threshold), float(m.goal_radius)))
+
+
+def check_episodes(cfg: Config) -> None:
+    from fmctd_dist.evaluation.controllers import check_controller
+
+    check_controller(cfg)  # AntMaze: the low-level policy exists and was trained for this maze
+
+
+class MazeEpisodes:
+    """The maze env + its controller factory, built once; :func:`evaluation.episode.run_episode` per episode."""
+
+    def __init__(self, cfg: Config):
+        from fmctd_dist.envs import make_env
+        from fmctd_dist.evaluation.controllers import controller_factory
+
+        self.cfg = cfg
+        self.env = make_env(cfg.env.name, cfg.env.protocol)
+        self.make_controller = controller_factory(cfg)
+
+    def run(self, planner: Planner, task: int, seed: int) -> dict[str, Any]:
+        from fmctd_dist.evaluation.episode import run_episode
+
+        return run_episode(self.cfg, self.env, planner, task, seed, make_controller=self.make_controller)
+
+
+def episodes(cfg: Config) -> MazeEpisodes:
+    return MazeEpisodes(cfg)

@@ -1,0 +1,254 @@
+"""Cube planning and episodes (issue 20): the family hooks, object-wise plans from a tiny cube model, the
+arm's pre-defined plans, a whole cube episode on both runners, failure reasons and bad inputs."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+
+from fmctd_dist.config import load_config
+from fmctd_dist.control.cube_scripts import ABOVE, EFFECTOR, PrePosition, Release
+from fmctd_dist.envs.cube import CubeEpisodes
+from fmctd_dist.errors import CheckpointError, ConfigError
+from fmctd_dist.evaluation.cube_failures import DROPPED, KNOCKED, PLANNING_TIME_OUT, TIME_OUT, WRONG_CUBE, why_failed
+from fmctd_dist.hooks import hooks_for
+from fmctd_dist.search.actions import scale_actions
+from fmctd_dist.search.loop import SearchParams, search
+from fmctd_dist.search.value_rule import MazeValue
+
+TINY_DATA = ["data.episodes=2", "data.episode_steps=121", "env.horizon=100", "data.train_window=100"]
+TINY_MODEL = ["model.width=32", "model.layers=1", "model.heads=2", "model.ff=64", "jump=5"]
+SEARCH = ["method.parallel=3", "method.budget=6"]
+
+
+# ---- the family hooks ----
+
+def test_maze_hooks_give_the_search_its_old_defaults():
+    """Mazes: the hook's actions and value are the loop's defaults, so trees and batches are bitwise unchanged."""
+    from fakes import FakeDenoiser, make_codec, make_schedule
+
+    cfg = load_config(["method=p-mctd", "method.parallel=4", "method.budget=12"])
+    acts, value = hooks_for(cfg.env.name).plan_rules(cfg).tree(np.zeros(2), np.ones(2))
+    params = SearchParams.from_method(cfg.method)
+    default = scale_actions(params.guidance_scales)
+    assert np.array_equal(acts.scale, default.scale) and acts.mask is None and acts.scale.dtype == np.float32
+    assert value == MazeValue(params.warp_threshold, params.goal_radius)
+    start, goal = np.array([10.0, 10.0]), np.array([14.0, 12.0])
+    runs = []
+    for kw in ({}, {"actions": acts, "value": value}):
+        den = FakeDenoiser()
+        r = search(den, make_schedule(), make_codec(), start, goal, params, 7, **kw)
+        runs.append((r, den.batches))
+    (a, ba), (b, bb) = runs
+    assert json.dumps(a.tree.to_json()) == json.dumps(b.tree.to_json()) and np.array_equal(a.plan, b.plan)
+    assert len(ba) == len(bb) and all(np.array_equal(x.x, y.x) and np.array_equal(x.scale, y.scale)
+                                      and x.guide_mask is None and y.guide_mask is None for x, y in zip(ba, bb))
+
+
+def test_cube_hooks_build_object_actions_from_the_unsolved_cubes():
+    cfg = load_config(["env=cube-double", "method=fast-mctd-replan"], serves=("cube",))
+    rules = hooks_for("cube-double").plan_rules(cfg)
+    start = np.array([0.0, 1.0, 0.2, 1.0, -1.0, 0.2])
+    goal = np.array([0.0, 1.0, 0.2, 2.0, 1.0, 0.2])  # cube 0 is already at its goal
+    acts, value = rules.tree(start, goal)
+    assert list(acts.obj) == [1, 1, 1] and list(acts.scale) == [1.0, 2.0, 4.0]
+    assert acts.mask.tolist() == [[0, 0, 0, 1, 1, 1]] * 3
+    assert value.warp_threshold == 2.0 and value.replanning  # jump 5: the sparse threshold; a replan method
+    fixed, _ = rules.fixed(start, goal)
+    assert fixed.mask.tolist() == [[0, 0, 0, 1, 1, 1]] and fixed.scale.tolist() == [cfg.method.guidance_scale]
+    dense = load_config(["env=cube-double", "method=mctd", "jump=1"], serves=("cube",))
+    v = hooks_for("cube-double").plan_rules(dense).value
+    assert v.warp_threshold == 1.0 and not v.replanning
+    with pytest.raises(ConfigError, match="object_scales"):
+        hooks_for("cube-double").plan_rules(load_config(["env=cube-double", "env.object_scales=[]"],
+                                                        serves=("cube",)))
+
+
+def test_a_family_without_hooks_is_one_error():
+    with pytest.raises(ConfigError, match="visual"):
+        hooks_for("visual-pointmaze-medium")
+
+
+# ---- scripted arm motions ----
+
+@pytest.fixture(scope="module")
+def single():
+    env = CubeEpisodes("cube-single")
+    yield env
+    env.close()
+
+
+def test_pre_position_and_release_move_the_effector_where_intended(single):
+    obs = single.reset(1, seed=0).obs
+    cube = single.state(obs)
+    pre = PrePosition(cube)
+    for k in range(pre.steps):
+        a = pre.act(obs, k)
+        assert a.shape == (5,) and np.all(np.abs(a) <= 1.0) and a[4] == -1.0
+        obs, _ = single.step(a)
+    assert np.linalg.norm(obs[EFFECTOR] - (cube + [0, 0, ABOVE])) < 0.3  # within 3 cm of the point above the cube
+    assert obs[17] < 0.3  # gripper open
+    before = obs[EFFECTOR].copy()
+    rel = Release()
+    for k in range(rel.steps):
+        a = rel.act(obs, k)
+        assert np.all(np.abs(a) <= 1.0)
+        obs, _ = single.step(a)
+        if k == 9:
+            lifted = obs[EFFECTOR] - before
+    assert lifted[2] > 0.5 and abs(lifted[0]) < lifted[2]  # 10 steps mostly up (5+ cm)
+    assert obs[EFFECTOR][0] - before[0] > 1.0 and obs[17] < 0.3  # then 10+ cm away in +x, still open
+
+
+# ---- failure reasons on hand-made trajectories ----
+
+def test_why_failed_on_hand_made_trajectories():
+    goal = np.array([[2.0, 0.0, 0.2], [0.0, 2.0, 0.2]])
+    still = np.array([[0.0, 0.0, 0.2], [0.0, 0.0, 0.6]])  # cube 1 on cube 0
+    traj = np.repeat(still[None], 5, 0)
+    assert why_failed(traj, np.full(4, -1), goal, True, False) == ""
+    assert why_failed(traj, np.full(4, -1), goal, False, True) == PLANNING_TIME_OUT
+    assert why_failed(traj, np.zeros(4), goal, False, False) == TIME_OUT
+    knocked = traj.copy()
+    knocked[3:, 1] = [1.0, 0.0, 0.2]  # the top cube ends on the table, never targeted
+    assert why_failed(knocked, np.zeros(4), goal, False, False) == KNOCKED
+    flat = np.repeat(np.array([[0.0, 0.0, 0.2], [0.0, -2.0, 0.2]])[None], 5, 0)
+    wrong = flat.copy()
+    wrong[2:, 1] = [0.0, -1.0, 0.2]  # cube 1 moved while cube 0 was the target
+    assert why_failed(wrong, np.zeros(4), goal, False, False) == WRONG_CUBE
+    dropped = flat.copy()
+    dropped[1:3, 0] = [0.5, 0.0, 0.8]
+    dropped[3:, 0] = [1.0, 0.0, 0.2]  # lifted, then down on the table short of its goal
+    assert why_failed(dropped, np.zeros(4), goal, False, False) == DROPPED
+
+
+# ---- a tiny cube-double model ----
+
+@pytest.fixture(scope="module")
+def tiny_double(tmp_path_factory):
+    """A 2-episode cube-double dataset, a 2-step sparse model and a random-weight cube policy (tmp dirs)."""
+    import torch
+
+    from fmctd_dist.control.policy.config import PolicyConfig
+    from fmctd_dist.control.policy.checkpoint import save_policy
+    from fmctd_dist.control.policy.cube import CUBE_SPEC
+    from fmctd_dist.control.policy.network import GoalPolicyNet
+    from fmctd_dist.data.registry import load_family_dataset, make_family_dataset
+    from fmctd_dist.data.windows import train_data
+    from fmctd_dist.diffusion.train import train
+
+    root = tmp_path_factory.mktemp("cube2")
+    args = ["env=cube-double", *TINY_DATA, *TINY_MODEL, f"data.root={root}", f"checkpoint={root / 'ckpt'}",
+            f"env.policy={root / 'policy'}"]
+    cfg = load_config(args + ["train.max_steps=2", "train.batch_size=4", "train.val_batches=1", "train.warmup=1"],
+                      method="mctd", serves=("cube",))
+    make_family_dataset(cfg, progress=False)
+    torch.manual_seed(0)
+    with torch.random.fork_rng():
+        train(cfg, train_data(cfg, load_family_dataset(cfg)), root / "ckpt", progress=False)
+    pcfg = PolicyConfig()
+    pcfg.policy.hidden = [16]
+    net = GoalPolicyNet([16], CUBE_SPEC.in_dim, CUBE_SPEC.act_dim)
+    save_policy(root / "policy", net, CUBE_SPEC, {"config": pcfg.to_dict(), "env": "cube-single"})
+    return args
+
+
+def test_a_cube_plan_has_the_right_shape_and_pins_the_other_cube(tiny_double):
+    from fmctd_dist.denoiser.local import LocalDenoiser
+    from fmctd_dist.diffusion.checkpoint import normaliser_from_manifest, read_manifest
+    from fmctd_dist.planners import make_planner
+
+    cfg = load_config(["method=fast-mctd-replan", *tiny_double, *SEARCH], serves=("cube",))
+    ckpt = cfg.checkpoint_dir()
+    planner = make_planner(cfg, LocalDenoiser.from_checkpoint(ckpt, cfg), normaliser_from_manifest(read_manifest(ckpt)))
+    env = CubeEpisodes("cube-double")
+    r = env.reset(1, seed=0)
+    start = env.state(r.obs)
+    out = planner.plan(start, r.goal, 0)
+    env.close()
+    plan = out.waypoints.reshape(-1, 2, 3)
+    assert out.waypoints.shape[1] == 6 and plan.shape[0] % cfg.jump == 0 and 0 < plan.shape[0] <= cfg.env.horizon
+    assert out.expansions > 0 and out.status in ("early_stop", "achieved", "partial", "not_reached", "stay")
+    tree = planner.last_result.tree
+    n = tree.num_nodes
+    acts, _ = planner.rules.tree(start, r.goal)  # 3 children per unsolved cube (task 1: one cube to move)
+    assert n > 1 and tree.children.shape[1] == acts.size == 3 * len(set(acts.obj.tolist()))
+    guided = acts.obj[tree.slot[1:n]]  # the cube each node's action guides
+    sims = tree.sim_plan[1:n].reshape(n - 1, -1, 2, 3)  # [nodes, F, cube, xyz]
+    for node, cube in enumerate(guided):
+        other = sims[node, :, 1 - cube]  # [F, 3] the un-guided cube is pinned to its start
+        assert np.array_equal(other, np.broadcast_to(start.reshape(2, 3)[1 - cube], other.shape).astype(np.float32))
+    moved = np.abs(plan - start.reshape(2, 3)).max(axis=(0, 2))  # [2] how far each cube's plan leaves its start
+    assert (moved < 1e-6).sum() >= 1  # the returned plan moves one cube only
+
+
+def run_grid(args: list[str], tmp_path, runner: str) -> list[dict]:
+    from fmctd_dist.evaluation.grid import prepare, run_local
+    from fmctd_dist.evaluation.results import ResultStore
+
+    cfg = load_config(args + [f"eval.out={tmp_path}", "eval.run=r", "tasks=[1]", "seeds=[0]", "env.max_steps=100",
+                              "env.replan_every=10", "eval.threads=1"], serves=("cube",))
+    p = prepare(cfg)
+    store = ResultStore(cfg.eval.out, cfg.eval.run)
+    if runner == "local":
+        return run_local(p, store, progress=False, log=lambda s: None)
+    from fmctd_dist.evaluation.ray_runner import run_ray
+
+    return run_ray(dataclasses.replace(p), store, progress=False, log=lambda s: None)
+
+
+def check_row(row: dict, searched: bool = True) -> None:
+    assert row["env"] == "cube-double" and row["env_steps"] == 100 and row["n_cubes"] == 2
+    assert row["plans"] >= 2 and (row["expansions"] > 0) == searched  # a replan every 10 policy steps after the 30 scripted ones
+    assert len(row["traj_cubes"]) == 101 * 6 and len(row["traj_effector"]) == 101 * 3
+    assert row["targets"] and set(row["targets"].split(",")) <= {"0", "1"}
+    assert row["why_failed"] in ("", "time out", "wrong cube", "dropped", "stack knocked over")
+
+
+def test_a_cube_episode_runs_in_process(tiny_double, tmp_path):
+    rows = run_grid(["method=fast-mctd-replan", *tiny_double, *SEARCH], tmp_path, "local")
+    assert len(rows) == 1
+    check_row(rows[0])
+
+
+@pytest.mark.ray
+def test_a_cube_episode_runs_on_ray_with_the_same_row(tiny_double, ray_cluster, tmp_path):
+    args = ["method=fast-mctd-replan", *tiny_double, *SEARCH]
+    local = run_grid(args, tmp_path / "local", "local")[0]
+    ray_row = run_grid(args + ["ray.denoiser_actors=1"], tmp_path / "ray", "ray")[0]
+    check_row(ray_row)
+    for k in ("success", "env_steps", "plan_status", "targets", "traj_cubes", "why_failed"):
+        assert ray_row[k] == local[k], k
+
+
+@pytest.mark.parametrize("method", ["diffusion-forcing", "mctd-replan", "p-mctd-replan", "s-mctd-replan"])
+def test_other_methods_run_cube_episodes_without_a_planner_change(tiny_double, tmp_path, method):
+    """The named method configs on a cube env (on the tiny sparse model: jump=5 for all)."""
+    rows = run_grid([f"method={method}", *tiny_double, *SEARCH], tmp_path, "local")  # tiny_double sets jump=5
+    check_row(rows[0], searched=method != "diffusion-forcing")
+
+
+# ---- bad inputs: one clear error before anything runs ----
+
+def test_a_missing_cube_policy_is_one_error_naming_the_training_command(tiny_double, tmp_path):
+    from fmctd_dist.evaluation.grid import prepare
+
+    args = [a for a in tiny_double if not a.startswith("env.policy=")]
+    cfg = load_config(["method=fast-mctd-replan", *args, f"env.policy={tmp_path / 'none'}"], serves=("cube",))
+    with pytest.raises(CheckpointError) as e:
+        prepare(cfg)
+    msg = str(e.value)
+    assert "\n" not in msg and "python jobs/train_policy.py env=cube-double" in msg and "env.policy=" in msg
+
+
+def test_a_maze_checkpoint_given_to_a_cube_env_is_one_error(tiny_double, tiny_checkpoint):
+    from fmctd_dist.evaluation.grid import prepare
+
+    _, maze_ckpt = tiny_checkpoint
+    args = [a for a in tiny_double if not a.startswith("checkpoint=")]
+    cfg = load_config(["method=fast-mctd-replan", *args, f"checkpoint={maze_ckpt}"], serves=("cube",))
+    with pytest.raises(CheckpointError, match="pointmaze-medium"):
+        prepare(cfg)
