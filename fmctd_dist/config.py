@@ -136,7 +136,7 @@ THREADS = "0 = torch's default; 1 when other jobs share the cores"
 
 @dataclass
 class EnvConfig:
-    # pointmaze-{medium,large,giant} | antmaze-{...} | cube-{single,double,triple} (cubes: data only so far)
+    # pointmaze-{medium,large,giant} | antmaze-{...} | cube-{single,double,triple}
     name: str = spec("pointmaze-medium", choices=ENV_NAMES)
     protocol: str = spec("fixed", choices=PROTOCOLS)  # fixed: start/goal at cell centres (paper); ogbench: stock +-1 noise
     max_steps: int = spec(500, gt=0, why="env steps of one episode (500 medium/large, 1000 giant)")

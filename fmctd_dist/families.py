@@ -27,11 +27,10 @@ VISUAL_ENVS = ("visual-pointmaze-medium", "visual-pointmaze-large")  # 64x64 cha
 ENV_NAMES = MAZE_ENVS + CUBE_ENVS + VISUAL_ENVS
 
 MAZE_FAMILIES = ("pointmaze", "antmaze")
-CUBE_NOT_BUILT = "the cube planner is not built yet (issue 20)"
 VISUAL_PLANNER_ISSUE = "issue 21"  # where the visual planner (VAE, inverse dynamics, latent DF) is built
 # Families whose planner is not built yet: load_config refuses them unless the job names them
 # (jobs/render_frames.py does), so train / eval stop with one ConfigError before any work.
-PENDING_FAMILIES = ("visual-pointmaze", "cube")  # cube: jobs/make_dataset.py and jobs/train.py serve it
+PENDING_FAMILIES = ("visual-pointmaze",)
 # Each family's hook module (fmctd_dist.hooks.FamilyHooks): its plan rules (the tree's actions and
 # value) and its episodes. Named, not imported, so this registry stays below everything.
 HOOKS = {"pointmaze": "fmctd_dist.hooks.maze", "antmaze": "fmctd_dist.hooks.maze", "cube": "fmctd_dist.hooks.cube"}
@@ -82,8 +81,8 @@ def require_family(name: str, families: tuple[str, ...], what: str) -> str:
                           f"jobs/make_dataset.py env={name.removeprefix('visual-')}, then python "
                           f"jobs/render_frames.py env={name}")
     if spec.family == "cube":
-        raise ConfigError(f"env.name={name} is a cube env, but {what} is built for mazes only; {CUBE_NOT_BUILT}. "
-                          f"What exists for cubes: python jobs/make_dataset.py env={name}; "
-                          f"python jobs/train.py env={name} jump=5; python jobs/train_policy.py env={name}")
+        raise ConfigError(f"env.name={name} is a cube env, but {what} is built for mazes only. The cube code: "
+                          f"python jobs/make_dataset.py env={name}; python jobs/train.py env={name} jump=5; "
+                          f"python jobs/train_policy.py env=cube-single; python jobs/eval.py env={name}")
     raise ConfigError(f"env.name={name} is a {spec.family} env, but {what} is built for "
                       f"{' / '.join(families)} envs only")

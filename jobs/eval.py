@@ -1,4 +1,4 @@
-"""Evaluate a planner on the PointMaze task x seed grid; one Parquet row per episode, resumable.
+"""Evaluate a planner on an env's task x seed grid (mazes, cubes); one Parquet row per episode, resumable.
 
     python jobs/eval.py                                         # embedded default (see README)
     python jobs/eval.py method=fast-mctd env=pointmaze-medium runner=local tasks=[1] seeds=[0]
@@ -7,17 +7,17 @@
 Everything is validated before any episode (or Ray actor) starts; rerunning an interrupted
 evaluation only runs the missing (task, seed) keys. Prints the paper-style table at the end
 and writes it to <eval.out>/<eval.run>/summary.md, with summary.png (success vs planning
-time) and <method>/<env>/episode.png (the first episode's plan and trajectory on the maze).
+time) and <method>/<env>/episode.png (the first episode's plan and trajectory, in the env family's picture).
 """
 
 import time
 
 from fmctd_dist.cli import run
 from fmctd_dist.config import load_config
-from fmctd_dist.envs import maze_geometry
 from fmctd_dist.evaluation.grid import prepare, run_local
-from fmctd_dist.evaluation.plots import plot_episode, plot_success_vs_time
+from fmctd_dist.evaluation.plots import plot_success_vs_time
 from fmctd_dist.evaluation.results import ResultStore, markdown_table, summarise
+from fmctd_dist.hooks import hooks_for
 
 
 def main(argv: list[str]) -> int:
@@ -39,7 +39,7 @@ def main(argv: list[str]) -> int:
     plot_success_vs_time(summary, store.root / "summary.png")
     if rows:
         first = min(rows, key=lambda r: (r["task"], r["seed"]))
-        plot_episode(first, maze_geometry(cfg.env.name), store.root / cfg.method.name / cfg.env.name / "episode.png")
+        hooks_for(cfg.env.name).plot_episode(first, store.root / cfg.method.name / cfg.env.name / "episode.png")
     print(table)
     print(f"{len(rows)} episodes in {store.root}; wall time {time.time() - t0:.1f}s")
     return 0

@@ -230,15 +230,14 @@ def test_cube_data_for_a_maze_model(tiny_cube, tmp_path):
 
 
 def test_maze_code_refuses_cube_envs(tiny_cube):
-    """jobs/eval.py stops at load_config (jobs/train.py serves cubes); the maze code guards its own entries too."""
+    """The maze code guards its own entries: a cube env name stops there with one error naming the cube jobs."""
     from fmctd_dist.data.dataset import load_dataset, make_dataset
     from fmctd_dist.envs import make_env, maze_geometry
 
     cfg, _, _ = tiny_cube
-    for call in (lambda: load_config(["env=cube-single"]), lambda: load_config(["env=cube-triple"], method="mctd"),
-                 lambda: make_env("cube-single"), lambda: maze_geometry("cube-double"),
+    for call in (lambda: make_env("cube-single"), lambda: maze_geometry("cube-double"),
                  lambda: load_dataset(cfg), lambda: make_dataset(cfg)):
-        with pytest.raises(ConfigError, match="is a cube env.*not built yet"):
+        with pytest.raises(ConfigError, match="is a cube env.*built for mazes only.*jobs/eval.py env=cube-"):
             call()
 
 
@@ -256,9 +255,9 @@ def test_make_dataset_job_smoke(tmp_path):
     assert out.returncode == 0, out.stderr[-2000:]
     assert "generated" in out.stdout and "0% of OGBench's 1000 episodes" in out.stdout
     assert (tmp_path / "cube-single-play-seed0-1x61" / "manifest.json").is_file()
-    bad = subprocess.run([sys.executable, "jobs/eval.py", "env=cube-single"], cwd=REPO_ROOT, capture_output=True,
-                         text=True, timeout=300)  # the cube planner is issue 20's
-    assert bad.returncode != 0 and "is a cube env" in bad.stderr + bad.stdout
+    bad = subprocess.run([sys.executable, "jobs/eval.py", "env=cube-single", f"checkpoint={tmp_path / 'none'}"],
+                         cwd=REPO_ROOT, capture_output=True, text=True, timeout=300)  # no model: one error, the fix
+    assert bad.returncode != 0 and "python jobs/train" in bad.stderr + bad.stdout
 
 
 # ---- Diffusion Forcing models on cube xyz (frames of 3 numbers per cube) ----

@@ -212,6 +212,8 @@ def test_a_cube_episode_runs_in_process(tiny_double, tmp_path):
     rows = run_grid(["method=fast-mctd-replan", *tiny_double, *SEARCH], tmp_path, "local")
     assert len(rows) == 1
     check_row(rows[0])
+    png = hooks_for("cube-double").plot_episode(rows[0], tmp_path / "episode.png")  # what jobs/eval.py draws
+    assert png.stat().st_size > 10_000
 
 
 @pytest.mark.ray

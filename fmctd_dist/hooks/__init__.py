@@ -11,6 +11,7 @@ imported by name, so nothing below the hooks imports them.
 from __future__ import annotations
 
 import importlib
+from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
@@ -52,6 +53,10 @@ class FamilyHooks(Protocol):
         ...
 
     def episodes(self, cfg: "Config") -> Episodes: ...
+
+    def plot_episode(self, row: dict[str, Any], path: Path) -> Path:
+        """The figure of one episode's row (plan and trajectory in the family's own picture)."""
+        ...
 
 
 def hooks_for(env_name: str) -> FamilyHooks:

@@ -92,3 +92,10 @@ class CubeEpisodeRunner:
 
 def episodes(cfg: Config) -> CubeEpisodeRunner:
     return CubeEpisodeRunner(cfg)
+
+
+def plot_episode(row: dict[str, Any], path: Path) -> Path:
+    """Cube paths and the effector from above, heights over time."""
+    from fmctd_dist.evaluation.cube_plots import plot_cube_episode
+
+    return plot_cube_episode(row, path)

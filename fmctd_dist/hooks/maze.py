@@ -8,6 +8,7 @@ batches, trees and plans are bitwise those of the old defaults.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -62,3 +63,11 @@ class MazeEpisodes:
 
 def episodes(cfg: Config) -> MazeEpisodes:
     return MazeEpisodes(cfg)
+
+
+def plot_episode(row: dict[str, Any], path: Path) -> Path:
+    """The first plan and the executed trajectory on the maze."""
+    from fmctd_dist.envs import maze_geometry
+    from fmctd_dist.evaluation.plots import plot_episode as plot_maze_episode
+
+    return plot_maze_episode(row, maze_geometry(row["env"]), path)
