@@ -206,6 +206,7 @@ def check_row(row: dict, searched: bool = True) -> None:
     assert len(row["traj_cubes"]) == 101 * 6 and len(row["traj_effector"]) == 101 * 3
     assert row["targets"] and set(row["targets"].split(",")) <= {"0", "1"}
     assert row["why_failed"] in ("", "time out", "wrong cube", "dropped", "stack knocked over")
+    assert len(row["policy_digest"]) == 16  # which policy drove the arm (a policy retrained mid-run shows)
 
 
 def test_a_cube_episode_runs_in_process(tiny_double, tmp_path):

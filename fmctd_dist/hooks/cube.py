@@ -82,12 +82,15 @@ class CubeEpisodeRunner:
 
         self.cfg = cfg
         self.env = CubeEpisodes(cfg.env.name)
-        self.policy = load_policy(policy_dir(cfg), cfg.env.name).act
+        policy = load_policy(policy_dir(cfg), cfg.env.name)
+        self.policy = policy.act
+        self.policy_digest = str(policy.manifest.get("digest", ""))  # rows say which policy drove the arm
 
     def run(self, planner: Planner, task: int, seed: int) -> dict[str, Any]:
         from fmctd_dist.evaluation.cube_episode import run_cube_episode
 
-        return run_cube_episode(self.cfg, self.env, planner, self.policy, task, seed)
+        row = run_cube_episode(self.cfg, self.env, planner, self.policy, task, seed)
+        return {**row, "policy_digest": self.policy_digest}
 
 
 def episodes(cfg: Config) -> CubeEpisodeRunner:
