@@ -255,3 +255,21 @@ def test_a_maze_checkpoint_given_to_a_cube_env_is_one_error(tiny_double, tiny_ch
     cfg = load_config(["method=fast-mctd-replan", *args, f"checkpoint={maze_ckpt}"], serves=("cube",))
     with pytest.raises(CheckpointError, match="pointmaze-medium"):
         prepare(cfg)
+
+
+def test_eval_job_smoke_on_a_cube_env(tiny_double, tmp_path):
+    """jobs/eval.py env=cube-double as a subprocess (tiny model, random policy): a row, the table, the figure."""
+    import os
+    import subprocess
+    import sys
+
+    from fmctd_dist.config import REPO_ROOT
+
+    words = ["method=fast-mctd-replan", *tiny_double, *SEARCH, "runner=local", f"eval.out={tmp_path}",
+             "eval.run=smoke", "tasks=[2]", "seeds=[0]", "env.max_steps=100", "eval.threads=1"]
+    out = subprocess.run([sys.executable, "jobs/eval.py", *words], cwd=REPO_ROOT, capture_output=True, text=True,
+                         timeout=600, env={**os.environ, "OMP_NUM_THREADS": "1"})
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert "| fast-mctd-replan | cube-double | 1 |" in out.stdout
+    assert (tmp_path / "smoke/fast-mctd-replan/cube-double/task=2/seed=0.parquet").is_file()
+    assert (tmp_path / "smoke/fast-mctd-replan/cube-double/episode.png").stat().st_size > 10_000
