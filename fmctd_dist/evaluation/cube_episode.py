@@ -44,6 +44,14 @@ def choose_target(plan: np.ndarray, state: np.ndarray, unsolved: list[int]) -> i
     return int(max(unsolved, key=lambda i: (length[i], -i)))
 
 
+def targets_left(rules: CubeValue, state: np.ndarray, goal: np.ndarray) -> list[int]:
+    """Cubes to carry: unsolved by the value's rules and not already released within RELEASE_RADIUS of their goal
+    (a cube let go there is left alone rather than picked up and released again); else every unsolved cube."""
+    unsolved = rules.unsolved(state, goal) or list(range(len(goal) // 3))
+    far = np.linalg.norm((state - goal).reshape(-1, 3), axis=1) >= RELEASE_RADIUS
+    return [i for i in unsolved if far[i]] or unsolved
+
+
 def replan_interval(cfg: Config) -> int:
     """Policy steps per plan for methods that replan (0 = follow each plan to its end)."""
     if cfg.method.replan_every <= 0:
@@ -97,8 +105,7 @@ def run_cube_episode(cfg: Config, env: CubeEpisodes, planner: Planner, policy: C
         if out.timed_out or (limit and plan_time > limit):
             timed_out = True
             break
-        unsolved = rules.unsolved(state, goal) or list(range(n))
-        target = choose_target(plan, state.reshape(n, 3), unsolved)
+        target = choose_target(plan, state.reshape(n, 3), targets_left(rules, state, goal))
         chosen.append(target)
         if target != last_target:
             script(PrePosition(plan[0, target]))
