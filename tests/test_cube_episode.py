@@ -273,3 +273,19 @@ def test_eval_job_smoke_on_a_cube_env(tiny_double, tmp_path):
     assert "| fast-mctd-replan | cube-double | 1 |" in out.stdout
     assert (tmp_path / "smoke/fast-mctd-replan/cube-double/task=2/seed=0.parquet").is_file()
     assert (tmp_path / "smoke/fast-mctd-replan/cube-double/episode.png").stat().st_size > 10_000
+
+
+def test_ideal_plans_job_smoke(tiny_double, tmp_path):
+    """jobs/cube_ideal_plans.py (arc plans instead of a model) runs the cube episode with the given policy."""
+    import os
+    import subprocess
+    import sys
+
+    from fmctd_dist.config import REPO_ROOT
+
+    policy = next(a for a in tiny_double if a.startswith("env.policy="))
+    out = subprocess.run([sys.executable, "jobs/cube_ideal_plans.py", "env=cube-double", policy, "tasks=[1]",
+                          "seeds=[0]", "env.max_steps=60", "env.horizon=50", "data.train_window=50"], cwd=REPO_ROOT,
+                         capture_output=True, text=True, timeout=300, env={**os.environ, "OMP_NUM_THREADS": "1"})
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert "task 1 seed 0:" in out.stdout and "episodes solved with ideal arc plans" in out.stdout
