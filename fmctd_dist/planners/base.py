@@ -10,7 +10,8 @@ import numpy as np
 
 @dataclass
 class PlanOutput:
-    """waypoints: [F_env, 2] world positions, one per env step (sparse plans already repeated H times)."""
+    """waypoints: [F_env, d] planner states (maze x, y; cube xyz per cube), one per env step (sparse plans already
+    repeated H times)."""
 
     waypoints: np.ndarray
     status: str
