@@ -103,6 +103,22 @@ def test_pre_position_and_release_move_the_effector_where_intended(single):
     assert obs[EFFECTOR][0] - before[0] > 1.0 and obs[17] < 0.3  # then 10+ cm away in +x, still open
 
 
+# ---- target choice ----
+
+def test_target_is_the_unsolved_cube_whose_plan_moves_most():
+    from fmctd_dist.evaluation.cube_episode import choose_target, targets_left
+    from fmctd_dist.search.cube_value import CubeValue
+
+    state = np.array([[0.0, 0.0, 0.2], [1.0, 1.0, 0.2], [2.0, 2.0, 0.2]])
+    plan = np.repeat(state[None], 10, 0)
+    plan[:, 0, 0] += np.linspace(0, 3, 10)  # cube 0 moves most, cube 1 a little
+    plan[:, 1, 1] += np.linspace(0, 1, 10)
+    assert choose_target(plan, state, [0, 1, 2]) == 0 and choose_target(plan, state, [1, 2]) == 1
+    goal = np.array([[0.0, 0.18, 0.2], [3.0, 3.0, 0.2], [2.0, 2.0, 0.2]])  # cube 0 let go 0.18 from its goal
+    assert CubeValue().unsolved(state.reshape(-1), goal.reshape(-1)) == [0, 1]  # outside the value's 0.15
+    assert targets_left(CubeValue(), state.reshape(-1), goal.reshape(-1)) == [1]  # not picked up again
+
+
 # ---- failure reasons on hand-made trajectories ----
 
 def test_why_failed_on_hand_made_trajectories():

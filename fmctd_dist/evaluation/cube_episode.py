@@ -2,7 +2,7 @@
 
 Per segment:
 1. plan from the current cube xyz [3N] (obs units) to the goal;
-2. the target cube = the unsolved cube whose planned path is longest;
+2. the target cube = the unsolved cube whose planned path is longest (kept while it is carried);
 3. on a new segment (the first plan, after a release, or when the target changes) the scripted
    pre-position: ~30 steps moving the open gripper above the target's first planned position;
 4. the low-level policy carries the target: its subgoal is the target's planned position 10
@@ -26,7 +26,7 @@ from fmctd_dist.control.cube_scripts import EFFECTOR, PrePosition, Release
 from fmctd_dist.control.policy.cube import cube_view
 from fmctd_dist.control.subgoal import SubgoalTracker
 from fmctd_dist.envs.cube import CubeEpisodes
-from fmctd_dist.evaluation.cube_failures import why_failed
+from fmctd_dist.evaluation.cube_failures import on_cube, why_failed
 from fmctd_dist.planners.base import Planner, plan_seed
 from fmctd_dist.search.cube_value import CubeValue
 
@@ -35,6 +35,7 @@ CubePolicy = Callable[[np.ndarray, np.ndarray], np.ndarray]  # (view [28], subgo
 RELEASE_RADIUS = 0.2  # obs units: the target this close to its goal is released
 SUBGOAL_AHEAD = 10  # env steps of plan between the cube and its subgoal
 SUBGOAL_RADIUS = 1.0  # obs units: the subgoal advances when the cube is this close
+CARRY_Z = 0.2 + 0.2  # obs units: the target above this (a level over the table), not on a cube, is carried
 
 
 def choose_target(plan: np.ndarray, state: np.ndarray, unsolved: list[int]) -> int:
@@ -105,7 +106,11 @@ def run_cube_episode(cfg: Config, env: CubeEpisodes, planner: Planner, policy: C
         if out.timed_out or (limit and plan_time > limit):
             timed_out = True
             break
-        target = choose_target(plan, state.reshape(n, 3), targets_left(rules, state, goal))
+        cubes_now = state.reshape(n, 3)
+        carrying = (last_target >= 0 and cubes_now[last_target, 2] > CARRY_Z
+                    and not on_cube(cubes_now[None])[0, last_target])
+        # a cube in the gripper stays the target: switching would open the gripper mid-air (the pre-position)
+        target = last_target if carrying else choose_target(plan, cubes_now, targets_left(rules, state, goal))
         chosen.append(target)
         if target != last_target:
             script(PrePosition(plan[0, target]))
