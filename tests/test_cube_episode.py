@@ -263,6 +263,16 @@ def test_a_missing_cube_policy_is_one_error_naming_the_training_command(tiny_dou
     assert "\n" not in msg and "python jobs/train_policy.py env=cube-double" in msg and "env.policy=" in msg
 
 
+def test_a_missing_cube_model_is_one_error_naming_the_training_command(tiny_double, tmp_path):
+    from fmctd_dist.evaluation.grid import prepare
+
+    args = [a for a in tiny_double if not a.startswith("checkpoint=")]
+    cfg = load_config(["method=fast-mctd-replan", *args, f"checkpoint={tmp_path / 'none'}"], serves=("cube",))
+    with pytest.raises(CheckpointError) as e:
+        prepare(cfg)
+    assert "\n" not in str(e.value) and "python jobs/train.py env=cube-double jump=5" in str(e.value)
+
+
 def test_a_maze_checkpoint_given_to_a_cube_env_is_one_error(tiny_double, tiny_checkpoint):
     from fmctd_dist.evaluation.grid import prepare
 
