@@ -37,8 +37,8 @@ def main(argv: list[str]) -> int:
         from fmctd_dist.visual.latents import make_latents
 
         path, m = make_latents(cfg, pcfg)
-        summary = {"out_dir": str(path), **{k: m[k] for k in ("episodes", "val_episodes", "frames", "sha256")},
-                   "generation": m["generation"]}
+        summary = {"out_dir": str(path), "episodes": len(m["episodes"]), "val_episodes": len(m["val_episodes"]),
+                   "frames": m["frames"], "sha256": m["sha256"], "generation": m["generation"]}
     elif part == "reach":
         from fmctd_dist.visual.reach import run_reach
 
