@@ -35,7 +35,7 @@ CubePolicy = Callable[[np.ndarray, np.ndarray], np.ndarray]  # (view [28], subgo
 RELEASE_RADIUS = 0.2  # obs units: the target this close to its goal is released
 SUBGOAL_AHEAD = 10  # env steps of plan between the cube and its subgoal
 SUBGOAL_RADIUS = 1.0  # obs units: the subgoal advances when the cube is this close
-CARRY_Z = 0.2 + 0.2  # obs units: the target above this (a level over the table), not on a cube, is carried
+CARRY_Z = 0.2 + 0.2  # obs units: the target above this (2 cm off the table), not on a cube, is being carried
 
 
 def choose_target(plan: np.ndarray, state: np.ndarray, unsolved: list[int]) -> int:
