@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from fmctd_dist.config import Config
-from fmctd_dist.control.policy.cube import CUBE_XYZ, VIEW_DIM, cube_view, policy_input
+from fmctd_dist.control.policy.cube import VIEW_DIM, cube_view, policy_input
 from fmctd_dist.control.policy.hindsight import label_run_ends
 from fmctd_dist.data.cube_dataset import dataset_dir, load_cube_manifest
 from fmctd_dist.data.npz import load_npz
@@ -89,5 +89,5 @@ def load_cube_policy_data(cfg: Config, path: Path | None = None) -> tuple[CubeRo
             raise DatasetError(f"{path / f'{split}.npz'} has no row to train on (episodes of one step); regenerate "
                                "with more data.episode_steps")
         out.append(rows)
-    assert out[0].views.shape[1] == VIEW_DIM and CUBE_XYZ.stop == 22
+    assert out[0].views.shape[1] == VIEW_DIM, out[0].views.shape
     return out[0], out[1], manifest

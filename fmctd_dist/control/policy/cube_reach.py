@@ -29,12 +29,12 @@ from typing import Any
 
 import numpy as np
 
+from fmctd_dist.control.policy.cube import cube_view
 from fmctd_dist.control.policy.cube_data import CubeRows
 from fmctd_dist.control.subgoal import SubgoalTracker
 from fmctd_dist.data.cube_dataset import NOISE_SMOOTHING, SEGMENT_DT, global_numpy_seed
 from fmctd_dist.device import torch_threads
 from fmctd_dist.envs.cube import ACT_DIM, XYZ_CENTER, XYZ_SCALE, cube_xyz, make_cube_env, n_cubes
-from fmctd_dist.control.policy.cube import cube_view
 
 Controller = Callable[[np.ndarray, np.ndarray], np.ndarray]  # (view [28], subgoal [3]) -> action [5]
 ROW_STREAM = 7  # SeedSequence([reach.seed, ROW_STREAM]) picks the rows
@@ -78,9 +78,9 @@ def restore(env, rows: CubeRows, i: int, cube: int, goal: np.ndarray, goal_quat:
     return np.asarray(ob, dtype=np.float64), u.get_reset_info()
 
 
-def try_once(env, name: str, controller: Controller | None, rows: CubeRows, i: int, n: int, offset: int,
-             advance: float, radius: float, max_steps: int, seed: int) -> dict[str, Any]:
-    """One try from row i; see the module doc."""
+def try_once(env, controller: Controller | None, rows: CubeRows, i: int, n: int, offset: int, advance: float,
+             radius: float, max_steps: int) -> dict[str, Any]:
+    """One try from row i (``controller`` None: OGBench's oracle); see the module doc."""
     from ogbench.manipspace.oracles.plan.cube_plan import CubePlanOracle
 
     c, u = int(rows.target[i]), int(rows.end[i])
@@ -127,8 +127,7 @@ def evaluate_reach(env_name: str, controllers: dict[str, Controller | None], row
                 res = []
                 for k, i in enumerate(tqdm(picks, desc=f"reach {name}", disable=not progress, mininterval=10)):
                     with global_numpy_seed(int(np.random.SeedSequence([seed, k]).generate_state(1)[0])):
-                        res.append(try_once(env, name, ctrl, rows, int(i), ncube, offset, advance, radius,
-                                            max_steps, seed))
+                        res.append(try_once(env, ctrl, rows, int(i), ncube, offset, advance, radius, max_steps))
                 hits = [r["hit"] for r in res if r["hit"] is not None]
                 table = [r["hit"] is not None for r in res if r["on_table"]]
                 lifted = [r["hit"] is not None for r in res if not r["on_table"]]
