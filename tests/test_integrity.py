@@ -129,6 +129,27 @@ def test_rerun_with_another_config_is_refused_listing_what_differs(tmp_path):
     assert missing(prepared("method.parallel=50", "eval.resume_mixed=true"), store) == [(2, 0)]
 
 
+def test_rows_of_another_low_level_policy_are_refused(tmp_path):
+    """The robot's low-level policy keys rows beside the planner checkpoint (a retrained ant or arm policy
+    must not mix into a run), and an episode runner that loaded another policy than the job checked stops."""
+    import dataclasses
+
+    from fmctd_dist.errors import CheckpointError
+    from fmctd_dist.evaluation.grid import same_policy
+
+    store = ResultStore(tmp_path, "r")
+    p = dataclasses.replace(prepared(), policy_digest="a" * 16)
+    store.write(fake_row(p, 1, 0))
+    assert missing(p, store) == [(2, 0)]
+    with pytest.raises(ResultsError, match=f"low-level policy digest: rows have {'a' * 16}, this run has {'b' * 16}"):
+        missing(dataclasses.replace(p, policy_digest="b" * 16), store)
+    with pytest.raises(ResultsError, match="low-level policy digest: rows have a+, this run has none"):
+        missing(prepared(), store)
+    same_policy(p, type("Episodes", (), {"policy_digest": "a" * 16})())
+    with pytest.raises(CheckpointError, match="env.policy changed while the job ran"):
+        same_policy(p, type("Episodes", (), {"policy_digest": "c" * 16})())
+
+
 def test_rows_from_before_config_json_list_their_knobs(tmp_path):
     store = ResultStore(tmp_path, "r")
     p = prepared()

@@ -16,7 +16,7 @@ from tqdm.auto import tqdm
 from fmctd_dist.config import Config, git_sha
 from fmctd_dist.device import resolve_device, set_threads
 from fmctd_dist.diffusion.checkpoint import read_manifest, verify_checkpoint
-from fmctd_dist.errors import ResultsError
+from fmctd_dist.errors import CheckpointError, ResultsError
 from fmctd_dist.evaluation.episode import describe
 from fmctd_dist.evaluation.identity import config_hash, differences, identity_columns
 from fmctd_dist.evaluation.results import ResultStore
@@ -33,14 +33,25 @@ class Prepared:
     device: str
     config_hash: str
     git_sha: str
+    policy_digest: str = ""  # the robot's low-level policy (ant, arm); "" when it has none (PD)
 
 
 def prepare(cfg: Config) -> Prepared:
-    hooks_for(cfg.env.name).check_episodes(cfg)  # e.g. the ant's or the arm's low-level policy exists and fits
+    policy = hooks_for(cfg.env.name).check_episodes(cfg)  # e.g. the ant's or the arm's policy exists and fits
     device = str(resolve_device(cfg.device))
     ckpt = cfg.checkpoint_dir()
     manifest = verify_checkpoint(ckpt, cfg)  # exists, well-typed, agrees with env/jump/model/n_tokens, sha256
-    return Prepared(cfg, ckpt, manifest["digest"], device, config_hash(cfg), git_sha())
+    return Prepared(cfg, ckpt, manifest["digest"], device, config_hash(cfg), git_sha(), policy)
+
+
+def same_policy(p: Prepared, episodes: Any) -> None:
+    """The policy an episode runner loaded is the one the job checked (a policy retrained while a grid
+    runs would otherwise mix into its rows): else one CheckpointError."""
+    loaded = getattr(episodes, "policy_digest", "")
+    if loaded != p.policy_digest:
+        raise CheckpointError(f"env.policy changed while the job ran: checked {p.policy_digest or 'none'}, loaded "
+                              f"{loaded or 'none'}; rerun once the policy stops changing (rows kept so far are "
+                              "from the checked one)")
 
 
 def grid(cfg: Config) -> list[tuple[int, int]]:
@@ -59,10 +70,11 @@ def missing(p: Prepared, store: ResultStore, log: Callable[[str], None] = print)
     rows = store.rows(cfg.method.name, cfg.env.name)
     for line in store.report():
         log(line)
-    foreign = [r for r in rows if (r.get("config_hash"), r.get("checkpoint_digest")) != (p.config_hash,
-                                                                                          p.checkpoint_digest)]
+    key = (p.config_hash, p.checkpoint_digest, p.policy_digest)
+    foreign = [r for r in rows if (r.get("config_hash"), r.get("checkpoint_digest"), r.get("policy_digest") or "") != key]
     if foreign and not cfg.eval.resume_mixed:
-        diffs = list(dict.fromkeys(d for r in foreign for d in differences(r, cfg, p.checkpoint_digest)))
+        diffs = list(dict.fromkeys(d for r in foreign for d in differences(r, cfg, p.checkpoint_digest,
+                                                                                p.policy_digest)))
         raise ResultsError(
             f"{store.root / cfg.method.name / cfg.env.name} holds {len(foreign)} row(s) from another config or "
             f"checkpoint: {'; '.join(diffs[:12])}{' ...' if len(diffs) > 12 else ''}. Write to a new run with "
@@ -76,7 +88,7 @@ def provenance(p: Prepared, n_actors: int) -> dict[str, Any]:
     """Run-level fields of a row: where it ran, and the search knobs the ablation tables group by."""
     m = p.cfg.method
     return {"n_denoiser_actors": n_actors, "device": p.device, "git_sha": p.git_sha,
-            "checkpoint_digest": p.checkpoint_digest, **identity_columns(p.cfg),
+            "checkpoint_digest": p.checkpoint_digest, "policy_digest": p.policy_digest, **identity_columns(p.cfg),
             "parallel": m.parallel, "virtual_weight": m.virtual_weight, "redundancy_aware": m.redundancy_aware,
             "leaf_parallel": m.leaf_parallel, "jump": p.cfg.jump, "budget": m.budget,
             "episode_time_limit": p.cfg.eval.episode_time_limit,
@@ -99,6 +111,7 @@ def run_local(p: Prepared, store: ResultStore, progress: bool = True,
     manifest = read_manifest(p.checkpoint)
     planner = make_planner(cfg, denoiser, normaliser_from_manifest(manifest), cfg.eval.episode_time_limit)
     episodes = hooks_for(cfg.env.name).episodes(cfg)  # the family's env + controller, built once
+    same_policy(p, episodes)
     rows = []
     bar = tqdm(todo, desc=f"{cfg.method.name} {cfg.env.name}", unit="ep", disable=not progress)
     for task, seed in bar:

@@ -70,11 +70,14 @@ def row_identity(row: dict[str, Any]) -> tuple:
     return row.get("config_hash"), row.get("checkpoint_digest"), row.get("episode_time_limit")
 
 
-def differences(row: dict[str, Any], cfg: Config, checkpoint_digest: str) -> list[str]:
+def differences(row: dict[str, Any], cfg: Config, checkpoint_digest: str, policy_digest: str = "") -> list[str]:
     """Human-readable ``field: rows have A, this run has B`` lines (empty = same identity)."""
     out = []
     if row.get("checkpoint_digest") != checkpoint_digest:
         out.append(f"checkpoint digest: rows have {row.get('checkpoint_digest')}, this run has {checkpoint_digest}")
+    if (row.get("policy_digest") or "") != policy_digest:
+        out.append(f"low-level policy digest: rows have {row.get('policy_digest') or 'none recorded'}, "
+                   f"this run has {policy_digest or 'none'}")
     if row.get("config_hash") == config_hash(cfg):
         return out
     if row.get("config_json"):

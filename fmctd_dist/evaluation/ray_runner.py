@@ -109,11 +109,14 @@ class EnvActor:
         from fmctd_dist.hooks import hooks_for
 
         _one_thread()
-        self.cfg = prepared.cfg
+        self.cfg, self.prepared = prepared.cfg, prepared
         self.episodes = hooks_for(self.cfg.env.name).episodes(self.cfg)  # the family's env + controller
         self.planner = _DriverPlanner(driver)
 
     def run(self, task: int, seed: int) -> dict[str, Any]:
+        from fmctd_dist.evaluation.grid import same_policy
+
+        same_policy(self.prepared, self.episodes)  # an error of the task (not a lost actor): the run stops
         return self.episodes.run(self.planner, task, seed)
 
     def info(self) -> dict[str, Any]:

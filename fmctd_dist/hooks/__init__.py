@@ -41,15 +41,18 @@ class PlanRules(Protocol):
 class Episodes(Protocol):
     """An env (+ its controller) that runs whole episodes and returns their rows."""
 
+    policy_digest: str  # digest of the low-level policy it loaded ("" when the robot has none)
+
     def run(self, planner: "Planner", task: int, seed: int) -> dict[str, Any]: ...
 
 
 class FamilyHooks(Protocol):
     def plan_rules(self, cfg: "Config") -> PlanRules: ...
 
-    def check_episodes(self, cfg: "Config") -> None:
+    def check_episodes(self, cfg: "Config") -> str:
         """Everything an episode needs besides the planner checkpoint (e.g. a low-level policy): one
-        clear error in the job process, before any actor starts."""
+        clear error in the job process, before any actor starts. Returns the low-level policy's
+        digest ("" when the robot has none), which keys the result rows beside the planner's."""
         ...
 
     def episodes(self, cfg: "Config") -> Episodes: ...

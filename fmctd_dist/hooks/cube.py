@@ -62,12 +62,12 @@ def policy_dir(cfg: Config) -> Path:
     return resolve_path(cfg.env.policy or DEFAULT_POLICY)
 
 
-def check_episodes(cfg: Config) -> None:
+def check_episodes(cfg: Config) -> str:
     """The cube policy exists and is a cube policy: else one CheckpointError naming the training command."""
     from fmctd_dist.control.policy.checkpoint import read_policy_manifest  # deferred: torch
 
     try:
-        read_policy_manifest(policy_dir(cfg), cfg.env.name)
+        return str(read_policy_manifest(policy_dir(cfg), cfg.env.name).get("digest", ""))
     except CheckpointError as e:
         raise CheckpointError(f"env.policy={cfg.env.policy or DEFAULT_POLICY} (the cube low-level policy; "
                               f"env.policy=DIR for another): {e}") from None
@@ -89,8 +89,7 @@ class CubeEpisodeRunner:
     def run(self, planner: Planner, task: int, seed: int) -> dict[str, Any]:
         from fmctd_dist.evaluation.cube_episode import run_cube_episode
 
-        row = run_cube_episode(self.cfg, self.env, planner, self.policy, task, seed)
-        return {**row, "policy_digest": self.policy_digest}
+        return run_cube_episode(self.cfg, self.env, planner, self.policy, task, seed)
 
 
 def episodes(cfg: Config) -> CubeEpisodeRunner:

@@ -38,10 +38,11 @@ def plan_rules(cfg: Config) -> MazeRules:
                      MazeValue(float(m.warp_threshold), float(m.goal_radius)))
 
 
-def check_episodes(cfg: Config) -> None:
+def check_episodes(cfg: Config) -> str:
     from fmctd_dist.evaluation.controllers import check_controller
 
-    check_controller(cfg)  # AntMaze: the low-level policy exists and was trained for this maze
+    manifest = check_controller(cfg)  # AntMaze: the low-level policy exists and was trained for this maze
+    return str(manifest.get("digest", "")) if manifest else ""
 
 
 class MazeEpisodes:
@@ -53,6 +54,7 @@ class MazeEpisodes:
 
         self.cfg = cfg
         self.env = make_env(cfg.env.name, cfg.env.protocol)
+        self.policy_digest = check_episodes(cfg)  # the ant policy the factory loads (its sha256 is checked there)
         self.make_controller = controller_factory(cfg)
 
     def run(self, planner: Planner, task: int, seed: int) -> dict[str, Any]:
