@@ -79,3 +79,18 @@ def test_shipped_diffuser_without_its_edge_frames_is_one_clear_error():
     cfg = load_config(MEDIUM_DIFFUSER + ["model.unet_edge_frames=0"])
     with pytest.raises(CheckpointError, match="unet_edge_frames"):
         load_checkpoint(cfg.checkpoint_dir(), cfg)
+
+
+@pytest.mark.slow
+def test_fast_mctd_replan_with_the_shipped_cube_model_and_policy_solves_cube_single_task1_seed0():
+    """Issue 20's smoke test: the shipped cube-single-h5 model + the shipped cube policy, in process."""
+    from fmctd_dist.hooks import hooks_for
+
+    cfg = load_config(["method=fast-mctd-replan", "env=cube-single"])
+    model, manifest = load_checkpoint(cfg.checkpoint_dir(), cfg)
+    with torch_threads(2):
+        planner = make_planner(cfg, LocalDenoiser(model, cfg.diffusion, "cpu", cfg.ray.micro_batch),
+                               normaliser_from_manifest(manifest))
+        row = hooks_for(cfg.env.name).episodes(cfg).run(planner, 1, 0)
+    assert row["success"], (row["plan_status"], row["why_failed"])
+    assert row["env_steps"] <= cfg.env.max_steps and row["why_failed"] == ""
