@@ -104,3 +104,13 @@ def test_summary_plot_tick_labels_never_collide(times):
     assert all(a.x1 <= b.x0 for a, b in zip(boxes, boxes[1:])), [t.get_text() for t in labels]
     assert ax.get_xscale() == ("log" if max(times) / min(times) >= 4 else "linear")
     plt.close(fig)
+
+
+def test_paper_cells_cover_the_robot_table():
+    """The cube rows print the paper's robot-table numbers beside ours (no std given there)."""
+    from fmctd_dist.evaluation.paper import paper_cell
+
+    assert paper_cell("fast-mctd-replan", "cube-single") == "100 / 3.0 s"
+    assert paper_cell("mctd-replan", "cube-triple") == "40 / 102.0 s"
+    assert paper_cell("fast-mctd", "pointmaze-giant") == "100 ± 0 / 2.4 ± 0.1 s"
+    assert paper_cell("fast-mctd", "cube-single") == "–"  # the paper ran only replanning searches on cubes

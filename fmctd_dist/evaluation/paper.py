@@ -1,4 +1,4 @@
-"""The paper's PointMaze and AntMaze numbers (Table "Maze results"), printed beside ours in every report.
+"""The paper's PointMaze, AntMaze and robot-arm cube numbers, printed beside ours in every report.
 
 (success %, success std, planning time s, time std) per (method, maze). Planning times are
 the authors' GPU times; compare ratios, not seconds, with our CPU runs.
@@ -23,7 +23,20 @@ PAPER_ANTMAZE: dict[str, dict[str, tuple[float, float, float, float]]] = {
     "s-mctd": {"medium": (94, 1, 12.5, 0.7), "large": (68, 13, 40.1, 2.6), "giant": (82, 14, 40.3, 2.9)},
     "fast-mctd": {"medium": (98, 6, 2.2, 0.1), "large": (77, 14, 2.2, 0.1), "giant": (90, 16, 2.5, 0.1)},
 }
-PAPER = {"pointmaze": PAPER_POINTMAZE, "antmaze": PAPER_ANTMAZE}
+# Robot table (reference.md §13): success %, planning time s; the paper gives no standard deviations.
+PAPER_CUBE: dict[str, dict[str, tuple[float, float | None, float, float | None]]] = {
+    "diffuser": {"single": (78, None, 6.3, None), "double": (12, None, 6.4, None), "triple": (8, None, 6.5, None)},
+    "diffuser-replan": {"single": (92, None, 21.4, None), "double": (12, None, 71.2, None),
+                        "triple": (4, None, 130.9, None)},
+    "diffusion-forcing": {"single": (100, None, 2.9, None), "double": (18, None, 15.2, None),
+                          "triple": (16, None, 15.9, None)},
+    "mctd-replan": {"single": (100, None, 9.2, None), "double": (78, None, 38.8, None), "triple": (40, None, 102.0, None)},
+    "p-mctd-replan": {"single": (100, None, 2.9, None), "double": (80, None, 6.5, None), "triple": (50, None, 11.4, None)},
+    "s-mctd-replan": {"single": (100, None, 8.5, None), "double": (75, None, 35.7, None), "triple": (42, None, 58.7, None)},
+    "fast-mctd-replan": {"single": (100, None, 3.0, None), "double": (77, None, 5.9, None),
+                         "triple": (50, None, 9.1, None)},
+}
+PAPER = {"pointmaze": PAPER_POINTMAZE, "antmaze": PAPER_ANTMAZE, "cube": PAPER_CUBE}
 
 
 def paper_cell(method: str, env: str) -> str:
@@ -33,4 +46,6 @@ def paper_cell(method: str, env: str) -> str:
     if row is None:
         return "–"
     s, sd, t, td = row
+    if sd is None or td is None:
+        return f"{s:.0f} / {t:.1f} s"
     return f"{s:.0f} ± {sd:.0f} / {t:.1f} ± {td:.1f} s"
