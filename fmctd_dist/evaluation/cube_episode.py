@@ -27,6 +27,7 @@ from fmctd_dist.control.policy.cube import cube_view
 from fmctd_dist.control.subgoal import SubgoalTracker
 from fmctd_dist.envs.cube import CubeEpisodes
 from fmctd_dist.evaluation.cube_failures import on_cube, why_failed
+from fmctd_dist.evaluation.plan_tally import PlanTally
 from fmctd_dist.planners.base import Planner, plan_seed
 from fmctd_dist.search.cube_value import CubeValue
 
@@ -72,9 +73,8 @@ def run_cube_episode(cfg: Config, env: CubeEpisodes, planner: Planner, policy: C
     every = replan_interval(cfg)
     cubes, effector, targets = [env.state(obs)], [obs[EFFECTOR]], []
     steps, success, timed_out = 0, False, False
-    plan_time = denoise_time = call_time = 0.0
-    expansions = iterations = retries = n_plans = releases = 0
-    statuses, chosen, first_plan = [], [], None
+    tally, releases = PlanTally(), 0
+    chosen, first_plan = [], None
     last_target = -1
 
     def step(action: np.ndarray, target: int) -> None:
@@ -93,17 +93,11 @@ def run_cube_episode(cfg: Config, env: CubeEpisodes, planner: Planner, policy: C
 
     while steps < cfg.env.max_steps and not success:
         state = env.state(obs)
-        out = planner.plan(state, goal, plan_seed(cfg.seed, task, seed, n_plans))
-        n_plans += 1
-        plan_time += out.plan_time_s
-        denoise_time += out.denoise_time_s
-        call_time += out.denoise_call_s
-        expansions, iterations = expansions + out.expansions, iterations + out.iterations
-        retries += out.retries
-        statuses.append(out.status)
+        out = planner.plan(state, goal, plan_seed(cfg.seed, task, seed, tally.plans))
+        tally.add(out)
         plan = np.asarray(out.waypoints, np.float64).reshape(-1, n, 3)  # [F, N, 3] one per env step
         first_plan = plan if first_plan is None else first_plan
-        if out.timed_out or (limit and plan_time > limit):
+        if out.timed_out or (limit and tally.plan_time_s > limit):
             timed_out = True
             break
         cubes_now = state.reshape(n, 3)
@@ -139,17 +133,7 @@ def run_cube_episode(cfg: Config, env: CubeEpisodes, planner: Planner, policy: C
         "success": success,
         "timed_out": timed_out,
         "env_steps": steps,
-        "plan_time_s": plan_time,
-        "denoise_time_s": denoise_time,
-        "overhead_s": plan_time - denoise_time,
-        "denoise_share": denoise_time / plan_time if plan_time > 0 else 0.0,
-        "denoise_call_s": call_time,
-        "call_share": call_time / plan_time if plan_time > 0 else 0.0,
-        "expansions": expansions,
-        "iterations": iterations,
-        "retries": retries,
-        "plans": n_plans,
-        "plan_status": ",".join(statuses),
+        **tally.columns(),
         "episode_time_s": time.perf_counter() - t_episode,
         "n_cubes": n,
         "targets": ",".join(str(t) for t in chosen),  # the target cube of each plan

@@ -17,6 +17,7 @@ import numpy as np
 from fmctd_dist.config import Config
 from fmctd_dist.envs.pointmaze import PointMaze
 from fmctd_dist.evaluation.controllers import ControllerFactory, controller_factory
+from fmctd_dist.evaluation.plan_tally import PlanTally
 from fmctd_dist.planners.base import Planner, plan_seed
 
 
@@ -35,19 +36,12 @@ def run_episode(cfg: Config, env: PointMaze, planner: Planner, task: int, seed: 
     pos = obs[:2]  # the planner's state: x, y (the ant's observation has 27 more features)
     traj, first_plan = [pos], None
     steps, success, timed_out = 0, False, False
-    plan_time = denoise_time = call_time = 0.0
-    expansions = iterations = retries = n_plans = 0
-    statuses = []
+    tally = PlanTally()
     while steps < cfg.env.max_steps and not success:
-        out = planner.plan(pos, goal, plan_seed(cfg.seed, task, seed, n_plans))
-        n_plans += 1
-        plan_time += out.plan_time_s
-        denoise_time += out.denoise_time_s
-        call_time += out.denoise_call_s
-        expansions, iterations, retries = expansions + out.expansions, iterations + out.iterations, retries + out.retries
-        statuses.append(out.status)
+        out = planner.plan(pos, goal, plan_seed(cfg.seed, task, seed, tally.plans))
+        tally.add(out)
         first_plan = out.waypoints if first_plan is None else first_plan
-        if out.timed_out or (limit and plan_time > limit):
+        if out.timed_out or (limit and tally.plan_time_s > limit):
             timed_out = True
             break
         ctrl = make_controller(out.waypoints)
@@ -66,17 +60,7 @@ def run_episode(cfg: Config, env: PointMaze, planner: Planner, task: int, seed: 
         "success": bool(success and not timed_out),
         "timed_out": timed_out,
         "env_steps": steps,
-        "plan_time_s": plan_time,
-        "denoise_time_s": denoise_time,
-        "overhead_s": plan_time - denoise_time,
-        "denoise_share": denoise_time / plan_time if plan_time > 0 else 0.0,
-        "denoise_call_s": call_time,
-        "call_share": call_time / plan_time if plan_time > 0 else 0.0,
-        "expansions": expansions,
-        "iterations": iterations,
-        "retries": retries,
-        "plans": n_plans,
-        "plan_status": ",".join(statuses),
+        **tally.columns(),
         "episode_time_s": time.perf_counter() - t_episode,
         "plan_xy": np.asarray(first_plan, np.float32).reshape(-1).tolist(),
         "traj_xy": np.asarray(traj, np.float32).reshape(-1).tolist(),
