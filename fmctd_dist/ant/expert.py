@@ -21,7 +21,7 @@ import torch
 from fmctd_dist.ant.config import DEFAULT_OUT, expert_config_from_dict
 from fmctd_dist.ant.direction_env import ACT_DIM, OBS_DIM, PROPRIO_DIM
 from fmctd_dist.ant.sac import Actor
-from fmctd_dist.diffusion.checkpoint import atomic_torch_save, first_line, module_state, sha256_file, write_manifest
+from fmctd_dist.diffusion.checkpoint import first_line, save_weights, sha256_file
 from fmctd_dist.errors import CheckpointError
 
 MODEL_FILE = "model.pt"
@@ -47,15 +47,8 @@ def save_expert(out_dir: str | Path, actor: Actor, fields: dict[str, Any]) -> di
     """Write model.pt then manifest.json; ``fields`` must hold ``config`` (AntExpertConfig.to_dict())."""
     if "config" not in fields:
         raise ValueError("fields needs 'config' (AntExpertConfig.to_dict())")
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    atomic_torch_save(module_state(actor), out_dir / MODEL_FILE)
-    sha = sha256_file(out_dir / MODEL_FILE)
-    manifest = {**fields, "kind": KIND, "format": FORMAT_VERSION, "obs_dim": actor.obs_dim, "act_dim": actor.act_dim,
-                "obs_layout": OBS_LAYOUT, "param_count": sum(p.numel() for p in actor.parameters()),
-                "model_sha256": sha, "digest": sha[:16]}
-    write_manifest(manifest, out_dir / MANIFEST_FILE)
-    return manifest
+    return save_weights(out_dir, actor, {**fields, "kind": KIND, "format": FORMAT_VERSION, "obs_dim": actor.obs_dim,
+                                         "act_dim": actor.act_dim, "obs_layout": OBS_LAYOUT})
 
 
 def read_expert_manifest(ckpt_dir: str | Path) -> dict[str, Any]:

@@ -70,6 +70,20 @@ def write_manifest(manifest: dict[str, Any], path: Path) -> None:
     os.replace(tmp, path)
 
 
+def save_weights(out_dir: str | Path, net: nn.Module, fields: dict[str, Any]) -> dict[str, Any]:
+    """Write ``net``'s model.pt (atomically), then its manifest: ``fields`` + param_count, model_sha256 and
+    digest (its first 16 hex). The one writer behind every kind of checkpoint (planner, policy, expert,
+    visual part), so they are all verified the same way."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    atomic_torch_save(module_state(net), out_dir / MODEL_FILE)
+    sha = sha256_file(out_dir / MODEL_FILE)
+    manifest = {**fields, "param_count": sum(p.numel() for p in net.parameters()), "model_sha256": sha,
+                "digest": sha[:16]}
+    write_manifest(manifest, out_dir / MANIFEST_FILE)
+    return manifest
+
+
 def save_checkpoint(ckpt_dir: str | Path, model: DFTransformer, manifest_fields: dict[str, Any]) -> dict[str, Any]:
     """Write model.pt then manifest.json; returns the manifest.
 
@@ -80,22 +94,8 @@ def save_checkpoint(ckpt_dir: str | Path, model: DFTransformer, manifest_fields:
     """
     if "config" not in manifest_fields:
         raise ValueError("manifest_fields needs 'config' (Config.to_dict())")
-    ckpt_dir = Path(ckpt_dir)
-    ckpt_dir.mkdir(parents=True, exist_ok=True)
-    atomic_torch_save(module_state(model), ckpt_dir / MODEL_FILE)
-    sha = sha256_file(ckpt_dir / MODEL_FILE)
-    manifest = {
-        **manifest_fields,
-        "format": FORMAT_VERSION,
-        "model_kind": model.kind,
-        "n_tokens": model.n_tokens,
-        "token_dim": model.token_dim,
-        "param_count": model.num_params(),
-        "model_sha256": sha,
-        "digest": sha[:16],
-    }
-    write_manifest(manifest, ckpt_dir / MANIFEST_FILE)
-    return manifest
+    return save_weights(ckpt_dir, model, {**manifest_fields, "format": FORMAT_VERSION, "model_kind": model.kind,
+                                          "n_tokens": model.n_tokens, "token_dim": model.token_dim})
 
 
 def _json_default(o: Any) -> Any:

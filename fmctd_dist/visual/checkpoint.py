@@ -17,8 +17,7 @@ from typing import Any
 
 from torch import nn
 
-from fmctd_dist.diffusion.checkpoint import (atomic_torch_save, module_state, sha256_file, torch_load_weights,
-                                             write_manifest)
+from fmctd_dist.diffusion.checkpoint import save_weights, sha256_file, torch_load_weights
 from fmctd_dist.errors import CheckpointError
 
 FORMAT_VERSION = 1
@@ -41,14 +40,7 @@ def save_part(out_dir: str | Path, part: str, net: nn.Module, fields: dict[str, 
     for key in ("env", "latent_dim"):
         if key not in fields:
             raise ValueError(f"fields needs {key!r}")
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    atomic_torch_save(module_state(net), out_dir / MODEL_FILE)
-    sha = sha256_file(out_dir / MODEL_FILE)
-    manifest = {**fields, "kind": KINDS[part], "format": FORMAT_VERSION,
-                "param_count": sum(p.numel() for p in net.parameters()), "model_sha256": sha, "digest": sha[:16]}
-    write_manifest(manifest, out_dir / MANIFEST_FILE)
-    return manifest
+    return save_weights(out_dir, net, {**fields, "kind": KINDS[part], "format": FORMAT_VERSION})
 
 
 def read_part_manifest(ckpt_dir: str | Path, part: str, env: str, latent_dim: int | None = None,

@@ -19,7 +19,7 @@ import torch
 from fmctd_dist.control.policy.network import GoalPolicyNet
 from fmctd_dist.control.policy.spec import PolicySpec
 from fmctd_dist.control.policy.specs import BY_KIND, spec_for_env
-from fmctd_dist.diffusion.checkpoint import atomic_torch_save, first_line, module_state, sha256_file, write_manifest
+from fmctd_dist.diffusion.checkpoint import first_line, save_weights, sha256_file
 from fmctd_dist.errors import CheckpointError
 from fmctd_dist.families import family
 
@@ -44,15 +44,9 @@ def save_policy(out_dir: str | Path, net: GoalPolicyNet, spec: PolicySpec, field
     """Write model.pt then manifest.json; ``fields`` must hold ``config`` (PolicyConfig.to_dict()) and ``env``."""
     if "config" not in fields or "env" not in fields:
         raise ValueError("fields needs 'config' (PolicyConfig.to_dict()) and 'env' (the env name)")
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    atomic_torch_save(module_state(net), out_dir / MODEL_FILE)
-    sha = sha256_file(out_dir / MODEL_FILE)
-    manifest = {**fields, "kind": spec.kind, "name": spec.name, "format": FORMAT_VERSION, "obs_dim": spec.obs_dim,
-                "act_dim": spec.act_dim, "in_dim": spec.in_dim, "input_layout": spec.input_layout,
-                "param_count": sum(p.numel() for p in net.parameters()), "model_sha256": sha, "digest": sha[:16]}
-    write_manifest(manifest, out_dir / MANIFEST_FILE)
-    return manifest
+    return save_weights(out_dir, net, {**fields, "kind": spec.kind, "name": spec.name, "format": FORMAT_VERSION,
+                                       "obs_dim": spec.obs_dim, "act_dim": spec.act_dim, "in_dim": spec.in_dim,
+                                       "input_layout": spec.input_layout})
 
 
 def read_policy_manifest(ckpt_dir: str | Path, env_name: str | None = None) -> dict[str, Any]:
