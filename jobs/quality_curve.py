@@ -62,8 +62,10 @@ def points(run: Path) -> list[tuple[str, dict[str, Any]]]:
     snaps = sorted((p for p in (run / SNAPSHOTS).glob("k*-step*") if (p / "manifest.json").exists()),
                    key=lambda p: int(p.name.rsplit("-step", 1)[1]))
     out = [(p.name, measure(p)) for p in snaps]
-    if (run / "manifest.json").exists() and all(r["digest"] != read_manifest(run)["digest"] for _, r in out):
-        out.append(("latest", measure(run)))
+    if (run / "manifest.json").exists():
+        latest = read_manifest(run)["digest"]
+        if all(r["digest"] != latest for _, r in out):
+            out.append(("latest", measure(run)))
     return out
 
 
