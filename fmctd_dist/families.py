@@ -2,7 +2,8 @@
 
 A family (design item 12) is an env module + a data module + configs (+ value rules and a
 controller): PointMaze (``envs/pointmaze.py``, ``data/dataset.py``), AntMaze (``envs/antmaze.py``,
-``data/ant_dataset.py``) and the robot-arm cubes (``envs/cube.py``, ``data/cube_dataset.py``).
+``data/ant_dataset.py``), the robot-arm cubes (``envs/cube.py``, ``data/cube_dataset.py``) and the
+visual maze (``envs/visual_pointmaze.py``, ``data/visual_dataset.py`` over ``visual/``'s latent store).
 This registry sits below all of them and imports nothing of ours but the errors, so config,
 envs and data can ask it without import cycles; ``search/``, ``denoiser/`` and ``evaluation/``
 never branch on a family.
@@ -28,12 +29,13 @@ ENV_NAMES = MAZE_ENVS + CUBE_ENVS + VISUAL_ENVS
 
 MAZE_FAMILIES = ("pointmaze", "antmaze")
 VISUAL_PLANNER_ISSUE = "issue 21"  # where the visual planner (VAE, inverse dynamics, latent DF) is built
-# Families whose planner is not built yet: load_config refuses them unless the job names them
-# (jobs/render_frames.py does), so train / eval stop with one ConfigError before any work.
-PENDING_FAMILIES = ("visual-pointmaze",)
+# Families whose planner is not built yet: load_config refuses them unless the job names them,
+# so train / eval stop with one ConfigError before any work. (None now: the visual maze's is built.)
+PENDING_FAMILIES: tuple[str, ...] = ()
 # Each family's hook module (fmctd_dist.hooks.FamilyHooks): its plan rules (the tree's actions and
 # value) and its episodes. Named, not imported, so this registry stays below everything.
-HOOKS = {"pointmaze": "fmctd_dist.hooks.maze", "antmaze": "fmctd_dist.hooks.maze", "cube": "fmctd_dist.hooks.cube"}
+HOOKS = {"pointmaze": "fmctd_dist.hooks.maze", "antmaze": "fmctd_dist.hooks.maze", "cube": "fmctd_dist.hooks.cube",
+         "visual-pointmaze": "fmctd_dist.hooks.visual"}
 
 
 @dataclass(frozen=True)
@@ -76,10 +78,10 @@ def require_family(name: str, families: tuple[str, ...], what: str) -> str:
     if spec.family in families:
         return name
     if spec.family == "visual-pointmaze":
-        raise ConfigError(f"env.name={name} is a visual maze env, but {what} is not built for it: the visual planner "
-                          f"is not built yet ({VISUAL_PLANNER_ISSUE}). Its data is the point maze's: python "
-                          f"jobs/make_dataset.py env={name.removeprefix('visual-')}, then python "
-                          f"jobs/render_frames.py env={name}")
+        raise ConfigError(f"env.name={name} is a visual maze env (64x64 images, {VISUAL_PLANNER_ISSUE}), but {what} "
+                          f"is not built for it. The visual maze's code: python jobs/train_visual.py part=... "
+                          f"env={name} (VAE, latents, estimator, inverse dynamics); python jobs/train.py env={name} "
+                          f"jump=5; python jobs/eval.py env={name}")
     if spec.family == "cube":
         raise ConfigError(f"env.name={name} is a cube env, but {what} is built for mazes only. The cube code: "
                           f"python jobs/make_dataset.py env={name}; python jobs/train.py env={name} jump=5; "

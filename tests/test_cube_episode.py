@@ -67,9 +67,9 @@ def test_cube_hooks_build_object_actions_from_the_unsolved_cubes():
                                                         serves=("cube",)))
 
 
-def test_a_family_without_hooks_is_one_error():
-    with pytest.raises(ConfigError, match="visual"):
-        hooks_for("visual-pointmaze-medium")
+def test_an_env_without_hooks_is_one_error():
+    with pytest.raises(ConfigError, match="did you mean 'visual-pointmaze-medium'"):
+        hooks_for("visual-pointmaze-meduim")
 
 
 # ---- scripted arm motions ----

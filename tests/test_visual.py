@@ -152,11 +152,9 @@ def test_no_gl_is_one_clear_error(monkeypatch):
         FrameRenderer(MEDIUM)
 
 
-def test_visual_env_is_refused_by_maze_only_jobs():
-    """train / eval / make_dataset get one ConfigError naming issue 21, not a crash deeper down."""
-    with pytest.raises(ConfigError, match=r"visual planner is not built yet \(issue 21\)"):
-        load_config([f"env={MEDIUM}"])
-    with pytest.raises(ConfigError, match=r"not built yet \(issue 21\)"):
+def test_visual_env_is_refused_by_maze_only_code():
+    """Maze-only code gets one ConfigError naming the visual maze's own jobs, not a crash deeper down."""
+    with pytest.raises(ConfigError, match=r"visual maze env \(64x64 images, issue 21\).*jobs/train_visual.py"):
         from fmctd_dist.envs.maze import maze_geometry
 
         maze_geometry(MEDIUM)

@@ -20,6 +20,7 @@ DATA_MODULES: dict[str, tuple[str, str, str]] = {
     "pointmaze": ("fmctd_dist.data.dataset", "make_dataset", "load_dataset"),
     "antmaze": ("fmctd_dist.data.dataset", "make_dataset", "load_dataset"),
     "cube": ("fmctd_dist.data.cube_dataset", "make_cube_dataset", "load_cube_dataset"),
+    "visual-pointmaze": ("fmctd_dist.data.visual_dataset", "make_visual_dataset", "load_visual_dataset"),
 }
 
 

@@ -13,7 +13,8 @@ from fmctd_dist.data.tokens import Normaliser, context_token, frames_to_tokens
 
 
 class WindowSampler:
-    """Draws [B, P+1, 2*frame_stack] normalised token windows from observations [E, S, 2]."""
+    """Draws [B, P+1, d*frame_stack] normalised token windows from frame states [E, S, d] (maze x, y; cube
+    xyz; visual latents)."""
 
     def __init__(self, obs: np.ndarray, train_window: int, jump: int, frame_stack: int, normaliser: Normaliser,
                  start_balance: float = 0.0):
@@ -68,10 +69,12 @@ def start_balance_cdf(starts: np.ndarray, alpha: float) -> np.ndarray:
 class TrainData:
     """What the training loop needs: train sampler, fixed validation batches, digest, normaliser."""
 
-    def __init__(self, train: WindowSampler, val: WindowSampler, digest: str, seed: int):
+    def __init__(self, train: WindowSampler, val: WindowSampler, digest: str, seed: int,
+                 provenance: dict | None = None):
         self.train, self.val = train, val
         self.normaliser = train.normaliser
         self.digest, self.seed = digest, seed
+        self.provenance = provenance or {}  # extra manifest fields the dataset asks a model to keep (visual: its VAE)
 
     @property
     def n_tokens(self) -> int:
@@ -91,4 +94,5 @@ def train_data(cfg, dataset) -> TrainData:
     kw = dict(train_window=cfg.data.train_window, jump=cfg.jump, frame_stack=cfg.model.frame_stack,
               normaliser=dataset.normaliser)
     train = WindowSampler(dataset.train, **kw, start_balance=cfg.train.start_balance)
-    return TrainData(train, WindowSampler(dataset.val, **kw), dataset.digest, cfg.data.seed)  # val stays uniform
+    return TrainData(train, WindowSampler(dataset.val, **kw), dataset.digest, cfg.data.seed,  # val stays uniform
+                     getattr(dataset, "provenance", None))

@@ -28,7 +28,7 @@ class LocalDenoiser:
     """Runs DenoiseBatch jobs with a DFTransformer; a pure function of the batch."""
 
     def __init__(self, model: DFTransformer, diffusion_cfg: DiffusionConfig, device: str = "cpu",
-                 micro_batch: int = 64, digest: str = ""):
+                 micro_batch: int = 64, digest: str = "", guide_map: torch.nn.Module | None = None):
         if micro_batch < 1:
             raise ValueError(f"micro_batch={micro_batch} must be >= 1")
         self.device = resolve_device(device)
@@ -41,15 +41,19 @@ class LocalDenoiser:
         self.guidance_path = diffusion_cfg.guidance_path  # through the whole x0 estimate, or its network branch
         self.micro_batch = micro_batch
         self.digest = digest  # checkpoint digest ("" for an in-memory model)
+        # the space guidance measures distances in (None: the frame state; the visual maze: estimated x, y)
+        self.guide_map = None if guide_map is None else guide_map.to(self.device).eval().requires_grad_(False)
 
     @classmethod
     def from_checkpoint(cls, path: str | Path, cfg: Config, device: str | None = None,
                         micro_batch: int | None = None, expect_digest: str | None = None) -> "LocalDenoiser":
         """Load and verify a checkpoint against ``cfg`` (device/micro_batch default to cfg's)."""
         from fmctd_dist.diffusion.checkpoint import load_checkpoint
+        from fmctd_dist.hooks import guide_map_for
 
         model, manifest = load_checkpoint(path, cfg, expect_digest)
-        return cls(model, cfg.diffusion, device or cfg.device, micro_batch or cfg.ray.micro_batch, manifest["digest"])
+        return cls(model, cfg.diffusion, device or cfg.device, micro_batch or cfg.ray.micro_batch, manifest["digest"],
+                   guide_map_for(cfg, manifest))
 
     def denoise(self, batch: DenoiseBatch) -> DenoiseResult:
         """x_out, x0 [B, T, D] float32 for B jobs; denoise_time_s = wall time of the model work."""
@@ -88,6 +92,7 @@ class LocalDenoiser:
             self.guidance_path,
             self.compiled,
             None if mb.guide_mask is None else torch.as_tensor(mb.guide_mask, dtype=torch.float32, device=dev),
+            self.guide_map,
         )
         x, x0 = x.cpu().numpy(), x0.cpu().numpy()  # waits for the device
         return x, x0, time.perf_counter() - t0

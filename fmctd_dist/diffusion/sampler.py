@@ -70,7 +70,7 @@ def make_consts(cfg: DiffusionConfig, device: torch.device | str = "cpu") -> Sam
 
 
 def goal_reward(x0: torch.Tensor, start: torch.Tensor, goal: torch.Tensor,
-                mask: torch.Tensor | None = None) -> torch.Tensor:
+                mask: torch.Tensor | None = None, guide_map: nn.Module | None = None) -> torch.Tensor:
     """R = -mean_f w_f tanh(||xy_f - target_f|| / 2) per job, in normalised space.
 
     x0: [B, T, D] tokens (token 0 = context), start/goal: [B, d] -> R: [B]. Tokens un-stack
@@ -82,11 +82,24 @@ def goal_reward(x0: torch.Tensor, start: torch.Tensor, goal: torch.Tensor,
     frames, and every cube's current position is observed, so it anchors the un-guided cubes
     where they are rather than steering any of them. Multiplying by 1.0 is exact in both passes,
     so an all-ones mask gives the bits of ``mask=None``.
+
+    ``guide_map`` (a module with ``in_dim``: frame states [..., in_dim] -> [..., d']): distances
+    are measured on mapped frames, start and goal, e.g. the visual maze's position estimator
+    reading (x, y) off a latent (``visual/guide.py``); the gradient then flows through the map.
     """
     b, t, dim = x0.shape
-    d = start.shape[-1]
-    fs = dim // d
-    frames = x0.reshape(b, t * fs, d)
+    if guide_map is not None:
+        if mask is not None:
+            raise ValueError("guide_mask and a guide map together are not supported: the mask's dims are the "
+                             "frame state's, the distance is the map's")
+        fs = dim // int(guide_map.in_dim)
+        frames = guide_map(x0.reshape(b, t * fs, dim // fs))
+        start, goal = guide_map(start), guide_map(goal)
+        d = frames.shape[-1]
+    else:
+        d = start.shape[-1]
+        fs = dim // d
+        frames = x0.reshape(b, t * fs, d)
     target = torch.cat((start[:, None].expand(b, fs, d), goal[:, None].expand(b, (t - 1) * fs, d)), dim=1)
     w = torch.full((t * fs,), GOAL_WEIGHT, dtype=x0.dtype, device=x0.device)
     w[:fs] = START_WEIGHT
@@ -102,9 +115,11 @@ def goal_reward(x0: torch.Tensor, start: torch.Tensor, goal: torch.Tensor,
 def transition(model: nn.Module, c: SamplerConsts, x: torch.Tensor, a: torch.Tensor, b: torch.Tensor,
                scale: torch.Tensor, start: torch.Tensor, goal: torch.Tensor,
                guidance_path: str = "input", force_grad: bool = False,
-               guide_mask: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+               guide_mask: torch.Tensor | None = None,
+               guide_map: nn.Module | None = None) -> tuple[torch.Tensor, torch.Tensor]:
     """One DDIM step from levels a to b. x: [B, T, D]; a, b: [B, T] long; scale: [B];
-    guide_mask: [B, d] or None (the dims the goal term uses, :func:`goal_reward`).
+    guide_mask: [B, d] or None (the dims the goal term uses, :func:`goal_reward`); guide_map: the
+    space the guidance measures distances in (None: the frame state itself).
 
     Returns (x_next, x0_hat), both [B, T, D]; for guided jobs x0_hat is the guided x0'. Tokens
     with a == b (and token 0, the context, always) come back bit-identical; x0_hat of a clean
@@ -121,7 +136,7 @@ def transition(model: nn.Module, c: SamplerConsts, x: torch.Tensor, a: torch.Ten
         with torch.enable_grad():
             xg = x_in.detach().requires_grad_(True)
             x0 = model(xg, t_in) if guidance_path == "input" else model(xg, t_in, skip_grad=False)
-            objective = GUIDANCE_GAIN * scale * goal_reward(x0, start, goal, guide_mask)  # [B]
+            objective = GUIDANCE_GAIN * scale * goal_reward(x0, start, goal, guide_mask, guide_map)  # [B]
             (grad,) = torch.autograd.grad(objective.sum(), xg)
         x0 = x0.detach()
     else:
@@ -164,11 +179,13 @@ def renoise_draws(seeds: torch.Tensor, row: int, shape: tuple[int, ...], device:
 def run_levels(model: nn.Module, c: SamplerConsts, x: torch.Tensor, levels: torch.Tensor, scale: torch.Tensor,
                start: torch.Tensor, goal: torch.Tensor, stats: dict | None = None,
                noise_seed: torch.Tensor | None = None, guidance_path: str = "input",
-               force_grad: bool = False, guide_mask: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+               force_grad: bool = False, guide_mask: torch.Tensor | None = None,
+               guide_map: nn.Module | None = None) -> tuple[torch.Tensor, torch.Tensor]:
     """Run levels [B, R+1, T] (row r -> r+1 per transition) on x [B, T, D].
 
     scale [B], start/goal [B, d], noise_seed [B] (needed only if some row goes up), guide_mask
-    [B, d] or None (object-wise guidance: the dims the goal term uses). Returns
+    [B, d] or None (object-wise guidance: the dims the goal term uses), guide_map: see
+    :func:`goal_reward`. Returns
     (x, x0): the final tokens and, per job, the x0 estimate of that job's last DDIM transition
     that moved a token (x itself if none did), so a job's result does not depend on which
     other jobs share its micro-batch. Rows where no token of any job goes down skip the model
@@ -189,7 +206,7 @@ def run_levels(model: nn.Module, c: SamplerConsts, x: torch.Tensor, levels: torc
         if not active:
             continue
         x, x0_r = transition(model, c, x, levels[:, r], levels[:, r + 1], scale, start, goal, guidance_path,
-                             force_grad, guide_mask)
+                             force_grad, guide_mask, guide_map)
         x0 = torch.where(down[:, r].any(dim=1)[:, None, None], x0_r, x0)
         calls += 1
     if stats is not None:

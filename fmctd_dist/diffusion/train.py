@@ -253,6 +253,7 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
                                                                                         tc.batch_size)]
     base = {"dataset_digest": data.digest, "data_seed": data.seed, "git_sha": git_sha(),
             "normaliser": {"mean": data.normaliser.mean.tolist(), "std": data.normaliser.std.tolist()}}
+    base.update(getattr(data, "provenance", {}))  # e.g. the visual maze's VAE and latent store
     if init_from is not None:
         base["init_from"] = init_from
 

@@ -1,4 +1,4 @@
-"""The paper's PointMaze, AntMaze and robot-arm cube numbers, printed beside ours in every report.
+"""The paper's PointMaze, AntMaze, robot-arm cube and visual PointMaze numbers, printed beside ours in every report.
 
 (success %, success std, planning time s, time std) per (method, maze). Planning times are
 the authors' GPU times; compare ratios, not seconds, with our CPU runs.
@@ -36,7 +36,14 @@ PAPER_CUBE: dict[str, dict[str, tuple[float, float | None, float, float | None]]
     "fast-mctd-replan": {"single": (100, None, 3.0, None), "double": (77, None, 5.9, None),
                          "triple": (50, None, 9.1, None)},
 }
-PAPER = {"pointmaze": PAPER_POINTMAZE, "antmaze": PAPER_ANTMAZE, "cube": PAPER_CUBE}
+# Visual PointMaze table (reference.md §14): success %, planning time s; no standard deviations given.
+_VISUAL = {"diffuser": (8, 0, 7.0, 6.7), "diffuser-replan": (8, 0, 26.4, 26.0), "diffusion-forcing": (66, 8, 14.5, 17.1),
+           "mctd": (76, 2, 98.8, 320.1), "p-mctd": (86, 0, 6.8, 7.6), "s-mctd": (82, 31, 40.1, 168.7),
+           "fast-mctd": (80, 32, 4.0, 5.1), "mctd-replan": (86, 31, 129.8, 419.7),
+           "fast-mctd-replan": (84, 38, 14.3, 26.7)}
+PAPER_VISUAL: dict[str, dict[str, tuple[float, float | None, float, float | None]]] = {
+    m: {"medium": (sm, None, tm, None), "large": (sl, None, tl, None)} for m, (sm, sl, tm, tl) in _VISUAL.items()}
+PAPER = {"pointmaze": PAPER_POINTMAZE, "antmaze": PAPER_ANTMAZE, "cube": PAPER_CUBE, "visual-pointmaze": PAPER_VISUAL}
 
 
 def paper_cell(method: str, env: str) -> str:

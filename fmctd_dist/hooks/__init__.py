@@ -62,6 +62,17 @@ class FamilyHooks(Protocol):
         ...
 
 
+def guide_map_for(cfg: "Config", manifest: dict[str, Any]) -> Any:
+    """The module the family's guidance measures distances through (``diffusion.sampler.goal_reward``), or None.
+
+    Optional per family: a hook module may define ``guide_map(cfg, manifest) -> torch module``
+    (the visual maze: latent -> estimated (x, y)); mazes and cubes do not, and guide on the state itself.
+    The denoiser asks this once, when it loads the planner checkpoint whose ``manifest`` is given.
+    """
+    fn = getattr(hooks_for(cfg.env.name), "guide_map", None)
+    return None if fn is None else fn(cfg, manifest)
+
+
 def hooks_for(env_name: str) -> FamilyHooks:
     """The hook module of ``env_name``'s family (an unknown name or a family without hooks: one ConfigError)."""
     require_family(env_name, tuple(HOOKS), "the planner and episode runner")

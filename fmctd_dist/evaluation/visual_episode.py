@@ -1,0 +1,72 @@
+"""One visual maze episode: see the chase camera's frame, plan in latents, act with the inverse dynamics.
+
+At every step the env renders the 64x64 chase-camera frame and the VAE encodes it (mu); the
+planner plans from that latent to the goal frame's latent (OGBench's ``render_goal``: the frame at
+the goal), and :class:`~fmctd_dist.control.latent_path.LatentPathController` acts toward the
+planned path, replanning every ``method.replan_every`` env steps (0 = open loop). The robot's
+true position is used only for success (OGBench's: within 1.0 of the goal) and the row's
+trajectory. ``plan_xy`` is the first plan as the estimator reads it (the figure's plan).
+
+Same row columns as the maze's episode (:func:`fmctd_dist.evaluation.episode.run_episode`), so
+grids, tables and reports read either.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any, Callable
+
+import numpy as np
+
+from fmctd_dist.config import Config
+from fmctd_dist.control.latent_path import InverseDynamics, LatentPathController
+from fmctd_dist.evaluation.plan_tally import PlanTally
+from fmctd_dist.planners.base import Planner, plan_seed
+
+Encoder = Callable[[np.ndarray], np.ndarray]  # uint8 [N, 64, 64, 3] -> mu [N, D]
+PositionFn = Callable[[np.ndarray], np.ndarray]  # latents [..., D] -> estimated world (x, y) [..., 2]
+
+
+def run_visual_episode(cfg: Config, env: Any, encode: Encoder, invdyn: InverseDynamics, positions: PositionFn,
+                       planner: Planner, task: int, seed: int, time_limit_s: float | None = None) -> dict[str, Any]:
+    """Run one episode of ``env`` (a :class:`~fmctd_dist.envs.visual_pointmaze.VisualPointMaze`); its row."""
+    limit = cfg.eval.episode_time_limit if time_limit_s is None else time_limit_s
+    t_episode = time.perf_counter()
+    reset = env.reset(task, seed)
+    pos = reset.obs[:2]
+    z = encode(env.image()[None])[0]
+    z_goal = encode(env.goal_image()[None])[0]
+    z_prev = z
+    traj, first_plan = [pos], None
+    steps, success, timed_out = 0, False, False
+    tally = PlanTally()
+    while steps < cfg.env.max_steps and not success:
+        out = planner.plan(z, z_goal, plan_seed(cfg.seed, task, seed, tally.plans))
+        tally.add(out)
+        first_plan = out.waypoints if first_plan is None else first_plan
+        if out.timed_out or (limit and tally.plan_time_s > limit):
+            timed_out = True
+            break
+        ctrl = LatentPathController(out.waypoints, cfg.jump, invdyn, z)
+        for _ in range(min(cfg.method.replan_every or cfg.env.max_steps, cfg.env.max_steps - steps)):
+            pos, success = env.step(ctrl.act(z_prev, z))
+            z_prev, z = z, encode(env.image()[None])[0]
+            traj.append(pos)
+            steps += 1
+            if success:
+                break
+    plan_xy = positions(np.asarray(first_plan)) if first_plan is not None else np.zeros((0, 2))
+    return {
+        "method": cfg.method.name,
+        "env": cfg.env.name,
+        "task": int(task),
+        "seed": int(seed),
+        "success": bool(success and not timed_out),
+        "timed_out": timed_out,
+        "env_steps": steps,
+        **tally.columns(),
+        "episode_time_s": time.perf_counter() - t_episode,
+        "plan_xy": np.asarray(plan_xy, np.float32).reshape(-1).tolist(),
+        "traj_xy": np.asarray(traj, np.float32).reshape(-1).tolist(),
+        "goal_xy_estimate_error": float(np.linalg.norm(positions(z_goal) - env.goal)),
+    }

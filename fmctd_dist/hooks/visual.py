@@ -1,0 +1,144 @@
+"""Visual maze hooks (reference §14): maze guidance scales and value on estimated positions; image episodes.
+
+- Plan rules: the tree's children are the maze's guidance scales (``method.guidance_scales``), the
+  guidance reads the position estimator's (x, y) of the latent plan (:func:`guide_map`, used by the
+  denoiser), and the value is the maze rule on estimated positions (:class:`VisualValue`; our
+  reading, the paper gives no visual value rule).
+- Episodes: the env renders the chase camera's 64x64 frame, the VAE encodes it, the planner plans
+  latents, the inverse dynamics acts toward them (``evaluation/visual_episode.py``).
+
+Parts: ``checkpoints/<env>-{vae,estimator,invdyn}``. :func:`check_episodes` checks, in the job
+process before any actor starts, that the planner checkpoint fits the config (a maze model given to
+the visual env is refused there), that it was trained on latents of the VAE loaded here, and that
+the estimator and inverse dynamics read that VAE's latents of the planner's size: one
+CheckpointError each, naming the field, the value and the fix.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fmctd_dist.config import Config
+from fmctd_dist.errors import CheckpointError
+from fmctd_dist.planners.base import Planner
+from fmctd_dist.search.actions import Actions, scale_actions
+from fmctd_dist.search.value_rule import MazeValue
+from fmctd_dist.visual.plan_value import VisualValue
+
+
+@dataclass(frozen=True)
+class VisualRules:
+    scales: tuple[float, ...]  # the tree's guidance scales (method.guidance_scales)
+    fixed_scale: float  # method.guidance_scale of planners without search
+    value: VisualValue
+
+    def tree(self, start: np.ndarray, goal: np.ndarray) -> tuple[Actions, VisualValue]:
+        return scale_actions(self.scales), self.value
+
+    def fixed(self, start: np.ndarray, goal: np.ndarray) -> tuple[Actions, VisualValue]:
+        return scale_actions([self.fixed_scale]), self.value
+
+
+@dataclass(frozen=True)
+class VisualParts:
+    """The checked manifests of the planner and the three parts it works with."""
+
+    planner: dict[str, Any]
+    vae: dict[str, Any]
+    estimator: dict[str, Any]
+    invdyn: dict[str, Any]
+
+
+def check_parts(cfg: Config) -> VisualParts:
+    """Planner, VAE, estimator and inverse dynamics agree (env, latent size, VAE digest, sha256); else one error."""
+    from fmctd_dist.diffusion.checkpoint import verify_checkpoint
+    from fmctd_dist.visual.checkpoint import read_part_manifest
+    from fmctd_dist.visual.config import part_dir
+    from fmctd_dist.visual.guide import latent_provenance
+
+    ckpt = cfg.checkpoint_dir()
+    planner = verify_checkpoint(ckpt, cfg)  # env, jump, model, n_tokens: a maze model stops here (env.name)
+    prov = latent_provenance(planner, ckpt)
+    vae_dir = part_dir(cfg, "", "vae")
+    vae = read_part_manifest(vae_dir, "vae", cfg.env.name)
+    if int(vae["latent_dim"]) != cfg.frame_dim or int(prov.get("latent_dim", -1)) != cfg.frame_dim:
+        raise CheckpointError(f"latent size: the VAE {vae_dir} makes {vae['latent_dim']}-D latents and the planner "
+                              f"{ckpt} models {prov.get('latent_dim')}-D ones, but env.name={cfg.env.name} plans "
+                              f"{cfg.frame_dim}-D latents; train the VAE with vae.latent_dim={cfg.frame_dim} and the "
+                              f"planner on its latents (python jobs/train.py env={cfg.env.name} jump={cfg.jump})")
+    if prov["vae_digest"] != vae["digest"]:
+        raise CheckpointError(f"checkpoint {ckpt}: latents.vae_digest={prov['vae_digest']!r} but the VAE in {vae_dir} "
+                              f"has digest {vae['digest']!r}: the planner models another VAE's latents; retrain it "
+                              f"on this VAE's latent store (python jobs/train.py env={cfg.env.name} jump={cfg.jump} "
+                              f"train.out=<new dir>) or restore the VAE it was trained with ({prov.get('vae_path')})")
+    heads = {part: read_part_manifest(part_dir(cfg, "", part), part, cfg.env.name, cfg.frame_dim, vae["digest"])
+             for part in ("estimator", "invdyn")}
+    return VisualParts(planner, vae, heads["estimator"], heads["invdyn"])
+
+
+def _positions(cfg: Config):
+    from fmctd_dist.diffusion.checkpoint import read_manifest
+    from fmctd_dist.visual.guide import Positions, latent_provenance, load_estimator_net
+
+    manifest = read_manifest(cfg.checkpoint_dir(), cfg)
+    prov = latent_provenance(manifest, cfg.checkpoint_dir())
+    net, _ = load_estimator_net(cfg, prov["vae_digest"], int(prov["latent_dim"]))
+    return Positions(net)
+
+
+def plan_rules(cfg: Config) -> VisualRules:
+    m = cfg.method
+    value = VisualValue(_positions(cfg), MazeValue(float(m.warp_threshold), float(m.goal_radius)))
+    return VisualRules(tuple(float(s) for s in m.guidance_scales), float(m.guidance_scale), value)
+
+
+def guide_map(cfg: Config, manifest: dict[str, Any]):
+    """The denoiser's guidance space: normalised latent -> normalised estimated (x, y) (``visual/guide.py``)."""
+    from fmctd_dist.visual.guide import guide_map as estimator_guide
+
+    return estimator_guide(cfg, manifest)
+
+
+def check_episodes(cfg: Config) -> str:
+    """Every part checked (see :func:`check_parts`); the inverse dynamics' digest keys the rows as a policy's."""
+    return str(check_parts(cfg).invdyn["digest"])
+
+
+class VisualEpisodes:
+    """The visual env, the VAE and the inverse dynamics, built once; :func:`run_visual_episode` per episode."""
+
+    def __init__(self, cfg: Config):
+        from fmctd_dist.envs.visual_pointmaze import VisualPointMaze
+        from fmctd_dist.visual.config import part_dir
+        from fmctd_dist.visual.load import load_invdyn, load_vae
+
+        self.cfg = cfg
+        parts = check_parts(cfg)
+        self.vae = load_vae(part_dir(cfg, "", "vae"), cfg.env.name, cfg.frame_dim)
+        self.invdyn = load_invdyn(part_dir(cfg, "", "invdyn"), cfg.env.name, self.vae)
+        self.positions = _positions(cfg)
+        self.policy_digest = str(parts.invdyn["digest"])
+        self.env = VisualPointMaze(cfg.env.name, cfg.env.protocol, shadowsize=cfg.visual.shadowsize)
+
+    def run(self, planner: Planner, task: int, seed: int) -> dict[str, Any]:
+        from fmctd_dist.evaluation.visual_episode import run_visual_episode
+
+        return run_visual_episode(self.cfg, self.env, self.vae.encode, self.invdyn, self.positions, planner, task,
+                                  seed)
+
+
+def episodes(cfg: Config) -> VisualEpisodes:
+    return VisualEpisodes(cfg)
+
+
+def plot_episode(row: dict[str, Any], path: Path) -> Path:
+    """The first plan as the estimator reads it and the executed trajectory, on the point maze's map."""
+    from fmctd_dist.envs import maze_geometry
+    from fmctd_dist.envs.visual_pointmaze import point_env_name
+    from fmctd_dist.evaluation.plots import plot_episode as plot_maze_episode
+
+    return plot_maze_episode(row, maze_geometry(point_env_name(row["env"])), path)

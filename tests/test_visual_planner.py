@@ -1,0 +1,210 @@
+"""The visual maze's planner (issue 21): latent windows, guidance through the estimator, the latent
+controller, bad inputs refused before any actor starts, and Fast-MCTD with the shipped medium models.
+
+Pure tests (no Ray). The checks on real parts use the shipped ``checkpoints/visual-pointmaze-medium-*``
+and skip when the planner checkpoint is absent.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from conftest import torch_threads
+from fmctd_dist.config import REPO_ROOT, load_config
+from fmctd_dist.errors import CheckpointError, ConfigError
+
+MEDIUM = "visual-pointmaze-medium"
+SHIPPED = REPO_ROOT / "checkpoints" / f"{MEDIUM}-h5"
+needs_shipped = pytest.mark.skipif(not (SHIPPED / "model.pt").exists(), reason=f"{SHIPPED} is not shipped")
+
+
+def _fake_dataset(d: int = 8, episodes: int = 2, steps: int = 1001):
+    from fmctd_dist.data.visual_dataset import VisualLatentDataset
+
+    rng = np.random.default_rng(0)
+    z = rng.normal(size=(episodes, steps, d)).astype(np.float32)
+    manifest = {"sha256": "ab" * 32, "vae": {"digest": "cf40771aa26c8504", "path": "checkpoints/x-vae"},
+                "latent_dim": d, "episodes": [3, 5], "val_episodes": [1], "frames_digest": "cd" * 32}
+    return VisualLatentDataset(Path("/nowhere"), manifest, z, z[:1], np.array([10.0, 8.0]), np.array([5.0, 4.0]))
+
+
+@pytest.mark.parametrize("jump,tokens", [(5, 11), (1, 51)])
+def test_latent_windows_have_the_planner_shape(jump, tokens):
+    """Windows of 8-D latents at H=5 and H=1: [B, horizon / (H * frame_stack) + 1, 8 * frame_stack]."""
+    from fmctd_dist.data.windows import train_data
+
+    cfg = load_config([f"env={MEDIUM}", f"jump={jump}"], method="mctd")
+    assert cfg.frame_dim == 8 and cfg.token_dim == 80 and cfg.n_tokens == tokens
+    ds = _fake_dataset()
+    data = train_data(cfg, ds)
+    x = data.sample(np.random.default_rng(0), 4)
+    assert x.shape == (4, tokens, 80) and x.dtype == np.float32
+    # token 0 is the first latent repeated; token 1's first frame is the latent H steps later
+    ep, off = np.divmod(0, data.train.offsets_per_episode)
+    w = data.train.windows(np.array([0]))[0]
+    norm = ds.normaliser
+    np.testing.assert_allclose(w[0, :8], norm.normalise(ds.train[0, 0]), rtol=1e-6)
+    np.testing.assert_allclose(w[1, :8], norm.normalise(ds.train[0, jump]), rtol=1e-6)
+    prov = data.provenance["latents"]
+    assert prov["vae_digest"] == "cf40771aa26c8504" and prov["store_sha256"] == "ab" * 32 and prov["latent_dim"] == 8
+
+
+def test_visual_env_trains_and_evaluates_now():
+    """The visual family is no longer refused by train / eval; a maze-only part still names the visual code."""
+    from fmctd_dist.envs.maze import maze_geometry
+    from fmctd_dist.hooks import hooks_for
+
+    assert load_config([f"env={MEDIUM}"]).env.name == MEDIUM
+    assert hooks_for(MEDIUM).__name__ == "fmctd_dist.hooks.visual"
+    with pytest.raises(ConfigError, match="jobs/train.py env=visual-pointmaze-medium jump=5"):
+        maze_geometry(MEDIUM)
+
+
+def _guide(seed: int = 0):
+    from fmctd_dist.visual.guide import EstimatorGuide
+    from fmctd_dist.visual.mlp import build_mlp
+
+    net = build_mlp(8, 2, [16, 16], seed)
+    g = torch.Generator().manual_seed(seed)
+    with torch.no_grad():
+        for p in net.parameters():
+            p.copy_(torch.randn(p.shape, generator=g) * 0.5)
+    return EstimatorGuide(net, np.full(8, 0.3), np.full(8, 2.0), np.array([10.0, 8.0]), np.array([5.0, 4.0]))
+
+
+def test_guidance_gradient_flows_through_the_estimator():
+    """d reward / d latents (autograd through the estimator MLP) equals a central finite difference."""
+    from fmctd_dist.diffusion.sampler import goal_reward
+
+    guide = _guide().double()
+    rng = np.random.default_rng(1)
+    x0 = torch.tensor(rng.normal(size=(2, 3, 80)), dtype=torch.float64, requires_grad=True)
+    start = torch.tensor(rng.normal(size=(2, 8)), dtype=torch.float64)
+    goal = torch.tensor(rng.normal(size=(2, 8)), dtype=torch.float64)
+    r = goal_reward(x0, start, goal, guide_map=guide)
+    assert r.shape == (2,)
+    (grad,) = torch.autograd.grad(r.sum(), x0)
+    assert grad.abs().max() > 1e-4  # the reward depends on the latents through the estimator
+    eps = 1e-6
+    for idx in [(0, 0, 0), (0, 1, 13), (1, 2, 79), (1, 1, 40)]:
+        xp, xm = x0.detach().clone(), x0.detach().clone()
+        xp[idx] += eps
+        xm[idx] -= eps
+        with torch.no_grad():
+            fd = (goal_reward(xp, start, goal, guide_map=guide).sum()
+                  - goal_reward(xm, start, goal, guide_map=guide).sum())
+        assert float(fd) / (2 * eps) == pytest.approx(float(grad[idx]), rel=1e-5, abs=1e-9)
+    # distances are those of the estimated positions: a plan sitting at the goal's latent scores the maximum
+    at_goal = goal[:, None].repeat(1, 30, 1).reshape(2, 3, 80)
+    at_goal[:, 0] = start.repeat(1, 10)
+    assert torch.allclose(goal_reward(at_goal, start, goal, guide_map=guide), torch.zeros(2, dtype=torch.float64))
+
+
+def test_guided_denoiser_moves_estimated_positions_toward_the_goal():
+    """One guided DDIM transition on a toy model: the estimated plan ends nearer the goal than unguided."""
+    from fmctd_dist.config import DiffusionConfig
+    from fmctd_dist.diffusion.sampler import make_consts, transition
+
+    guide = _guide()
+
+    class Shrink(torch.nn.Module):  # x0_hat = x / 2: depends on the noisy input, as a real model's does
+        def forward(self, x, t, **kw):
+            return 0.5 * x
+
+    c = make_consts(DiffusionConfig())
+    x = torch.randn(1, 3, 80, generator=torch.Generator().manual_seed(0))
+    a, b = torch.tensor([[0, 40, 40]]), torch.tensor([[0, 30, 30]])
+    start, goal = torch.zeros(1, 8), torch.full((1, 8), 1.5)
+    out = {}
+    for s in (0.0, 1.0):
+        xn, _ = transition(Shrink(), c, x, a, b, torch.tensor([s]), start, goal, guide_map=guide)
+        with torch.no_grad():
+            out[s] = float((guide(xn[:, 1:].reshape(1, 20, 8)) - guide(goal)).norm(dim=-1).mean())
+    assert out[1.0] < out[0.0]
+
+
+def test_latent_controller_targets_interpolate_the_sparse_plan():
+    from fmctd_dist.control.latent_path import LatentPathController, latent_targets
+    from fmctd_dist.control.pd import repeat_waypoints
+
+    plan = np.array([[1.0, 0.0], [2.0, 1.0]])
+    t = latent_targets(repeat_waypoints(plan, 5), 5, np.zeros(2))
+    assert t.shape == (11, 2)
+    np.testing.assert_allclose(t[:, 0], np.linspace(0, 2, 11))
+    np.testing.assert_allclose(t[5], [1.0, 0.0])
+    seen = []
+    ctrl = LatentPathController(plan, 1, lambda x: seen.append(x) or np.array([3.0, -0.5]), np.zeros(2))
+    a = ctrl.act(np.zeros(2), np.ones(2))
+    assert a.tolist() == [1.0, -0.5]  # clipped to the action box
+    np.testing.assert_allclose(seen[0], [0, 0, 1, 1, 1, 0])  # (z_prev, z, target at step 1)
+
+
+def _copy_planner(tmp_path: Path, **edits) -> Path:
+    out = tmp_path / "planner"
+    shutil.copytree(SHIPPED, out)
+    m = json.loads((out / "manifest.json").read_text())
+    for key, value in edits.items():
+        node = m
+        *head, last = key.split(".")
+        for k in head:
+            node = node[k]
+        if value is None:
+            node.pop(last)
+        else:
+            node[last] = value
+    (out / "manifest.json").write_text(json.dumps(m))
+    return out
+
+
+@needs_shipped
+def test_bad_inputs_are_one_clear_error_each(tmp_path):
+    """Checked by the hooks in the job process (grid.prepare calls check_episodes first): one error each."""
+    from fmctd_dist.hooks import hooks_for
+
+    hooks = hooks_for(MEDIUM)
+    cfg = load_config([f"env={MEDIUM}", "jump=5"])
+    assert hooks.check_episodes(cfg) == json.loads(
+        (REPO_ROOT / f"checkpoints/{MEDIUM}-invdyn/manifest.json").read_text())["digest"]
+    # a point maze model given to the visual env: the field, the value and the fix
+    with pytest.raises(CheckpointError, match=r"env\.name.*pointmaze-medium.*visual-pointmaze-medium"):
+        hooks.check_episodes(load_config([f"env={MEDIUM}", "jump=5", "checkpoint=checkpoints/pointmaze-medium-h5"]))
+    # a planner trained on another VAE's latents
+    other = _copy_planner(tmp_path, **{"latents.vae_digest": "0123456789abcdef"})
+    with pytest.raises(CheckpointError, match=r"latents.vae_digest='0123456789abcdef'.*cf40771aa26c8504.*retrain"):
+        hooks.check_episodes(load_config([f"env={MEDIUM}", "jump=5", f"checkpoint={other}"]))
+    # a planner of another latent size
+    shutil.rmtree(other)
+    small = _copy_planner(tmp_path, **{"latents.latent_dim": 3})
+    with pytest.raises(CheckpointError, match=r"latent size.*3-D.*vae.latent_dim=8"):
+        hooks.check_episodes(load_config([f"env={MEDIUM}", "jump=5", f"checkpoint={small}"]))
+    shutil.rmtree(small)
+    # a state-space manifest without latents provenance
+    bare = _copy_planner(tmp_path, latents=None)
+    with pytest.raises(CheckpointError, match=r"no latents.vae_digest.*jobs/train.py env=visual-pointmaze-medium"):
+        hooks.check_episodes(load_config([f"env={MEDIUM}", "jump=5", f"checkpoint={bare}"]))
+    # latents of the wrong size handed to the value's estimator
+    with pytest.raises(CheckpointError, match="8-D latents"):
+        hooks.plan_rules(cfg).value.positions(np.zeros((2, 5, 3)))
+
+
+@needs_shipped
+def test_fast_mctd_solves_task1_seed0_with_the_shipped_models():
+    """The smoke test of issue 21: Fast-MCTD, shipped visual-medium planner + VAE + estimator + inverse dynamics."""
+    from fmctd_dist.denoiser.local import LocalDenoiser
+    from fmctd_dist.diffusion.checkpoint import normaliser_from_manifest, read_manifest
+    from fmctd_dist.hooks import hooks_for
+    from fmctd_dist.planners import make_planner
+
+    cfg = load_config([f"env={MEDIUM}", "method=fast-mctd"])
+    with torch_threads(1):
+        denoiser = LocalDenoiser.from_checkpoint(cfg.checkpoint_dir(), cfg)
+        planner = make_planner(cfg, denoiser, normaliser_from_manifest(read_manifest(cfg.checkpoint_dir())))
+        episodes = hooks_for(MEDIUM).episodes(cfg)
+        row = episodes.run(planner, 1, 0)
+    assert row["success"], f"task 1 seed 0 failed after {row['env_steps']} steps ({row['plan_status']})"
