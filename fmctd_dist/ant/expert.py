@@ -10,7 +10,6 @@ field and the fix.
 
 from __future__ import annotations
 
-import json
 import shlex
 from pathlib import Path
 from typing import Any
@@ -21,7 +20,7 @@ import torch
 from fmctd_dist.ant.config import DEFAULT_OUT, expert_config_from_dict
 from fmctd_dist.ant.direction_env import ACT_DIM, OBS_DIM, PROPRIO_DIM
 from fmctd_dist.ant.sac import Actor
-from fmctd_dist.diffusion.checkpoint import first_line, save_weights, sha256_file
+from fmctd_dist.diffusion.checkpoint import first_line, read_weights_manifest, save_weights, sha256_file
 from fmctd_dist.errors import CheckpointError
 
 MODEL_FILE = "model.pt"
@@ -54,13 +53,8 @@ def save_expert(out_dir: str | Path, actor: Actor, fields: dict[str, Any]) -> di
 def read_expert_manifest(ckpt_dir: str | Path) -> dict[str, Any]:
     """The manifest of an expert dir; CheckpointError if anything is missing or it is another kind."""
     ckpt_dir = Path(ckpt_dir)
-    for path in (ckpt_dir, ckpt_dir / MODEL_FILE, ckpt_dir / MANIFEST_FILE):
-        if not path.exists():
-            raise CheckpointError(f"ant expert: {path} does not exist; {train_fix(ckpt_dir)} (or point to its dir)")
-    try:
-        manifest = json.loads((ckpt_dir / MANIFEST_FILE).read_text())
-    except (OSError, json.JSONDecodeError) as e:
-        raise CheckpointError(f"ant expert: {ckpt_dir / MANIFEST_FILE} is unreadable ({e}); {train_fix(ckpt_dir, broken=True)}") from None
+    manifest = read_weights_manifest(ckpt_dir, "ant expert", f"{train_fix(ckpt_dir)} (or point to its dir)",
+                                     train_fix(ckpt_dir, broken=True))
     if manifest.get("kind") != KIND:
         what = manifest.get("kind") or manifest.get("model_kind") or "unknown"
         raise CheckpointError(

@@ -129,6 +129,26 @@ def torch_load_weights(path: Path, where: str, fix: str) -> Any:
         raise CheckpointError(f"{where}: {path.name} does not load ({first_line(e)}); {fix}") from None
 
 
+def read_weights_manifest(ckpt_dir: Path, who: str, missing_fix: str, broken_fix: str) -> dict[str, Any]:
+    """The manifest of a dir written by :func:`save_weights` (policies, the ant expert, visual parts).
+
+    The three ways such a dir can be unusable before its kind is even read are worded once:
+    ``who: <path> does not exist; missing_fix``, ``who: manifest.json is unreadable (...); broken_fix``
+    and ``who: manifest.json is not a JSON object; broken_fix``. Callers check their own fields after.
+    """
+    for path in (ckpt_dir, ckpt_dir / MODEL_FILE, ckpt_dir / MANIFEST_FILE):
+        if not path.exists():
+            raise CheckpointError(f"{who}: {path} does not exist; {missing_fix}")
+    path = ckpt_dir / MANIFEST_FILE
+    try:
+        manifest = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise CheckpointError(f"{who}: {path} is unreadable ({first_line(e)}); {broken_fix}") from None
+    if not isinstance(manifest, dict):
+        raise CheckpointError(f"{who}: {path} is not a JSON object; {broken_fix}")
+    return manifest
+
+
 def _fresh_dir(cfg: Config) -> Path:
     """A new checkpoint dir for cfg's model when the expected one holds another model (never overwritten)."""
     tag = hashlib.sha256(" ".join(training_words(cfg)).encode()).hexdigest()[:8]

@@ -11,13 +11,12 @@ naming the field, the value and the fix.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
 from torch import nn
 
-from fmctd_dist.diffusion.checkpoint import save_weights, sha256_file, torch_load_weights
+from fmctd_dist.diffusion.checkpoint import read_weights_manifest, save_weights, sha256_file, torch_load_weights
 from fmctd_dist.errors import CheckpointError
 
 FORMAT_VERSION = 1
@@ -49,15 +48,7 @@ def read_part_manifest(ckpt_dir: str | Path, part: str, env: str, latent_dim: in
     ckpt_dir = Path(ckpt_dir)
     fix = train_fix(part, env, ckpt_dir)
     name = f"visual {part} checkpoint {ckpt_dir}"
-    for path in (ckpt_dir, ckpt_dir / MODEL_FILE, ckpt_dir / MANIFEST_FILE):
-        if not path.exists():
-            raise CheckpointError(f"{name}: {path} does not exist; {fix} (or point {part}.out to its dir)")
-    try:
-        m = json.loads((ckpt_dir / MANIFEST_FILE).read_text())
-    except (OSError, json.JSONDecodeError) as e:
-        raise CheckpointError(f"{name}: {MANIFEST_FILE} is unreadable ({e}); {fix}") from None
-    if not isinstance(m, dict):
-        raise CheckpointError(f"{name}: {MANIFEST_FILE} is not a JSON object; {fix}")
+    m = read_weights_manifest(ckpt_dir, name, f"{fix} (or point {part}.out to its dir)", fix)
     kind = m.get("kind") or m.get("model_kind") or "unknown"
     if kind != KINDS[part]:
         cfg = m.get("config") if isinstance(m.get("config"), dict) else {}

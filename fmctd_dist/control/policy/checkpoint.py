@@ -9,7 +9,6 @@ another env, corrupt, shapes) is one :class:`CheckpointError` that says what to 
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
@@ -19,7 +18,7 @@ import torch
 from fmctd_dist.control.policy.network import GoalPolicyNet
 from fmctd_dist.control.policy.spec import PolicySpec
 from fmctd_dist.control.policy.specs import BY_KIND, spec_for_env
-from fmctd_dist.diffusion.checkpoint import first_line, save_weights, sha256_file
+from fmctd_dist.diffusion.checkpoint import first_line, read_weights_manifest, save_weights, sha256_file
 from fmctd_dist.errors import CheckpointError
 from fmctd_dist.families import family
 
@@ -59,15 +58,7 @@ def read_policy_manifest(ckpt_dir: str | Path, env_name: str | None = None) -> d
     want = spec_for_env(env_name) if env_name is not None else None
     who = label(want)
     fix = train_fix(env_name or "<env>", ckpt_dir)
-    for path in (ckpt_dir, ckpt_dir / MODEL_FILE, ckpt_dir / MANIFEST_FILE):
-        if not path.exists():
-            raise CheckpointError(f"{who}: {path} does not exist; {fix} (or point policy.out to its dir)")
-    try:
-        manifest = json.loads((ckpt_dir / MANIFEST_FILE).read_text())
-    except (OSError, json.JSONDecodeError) as e:
-        raise CheckpointError(f"{who}: {ckpt_dir / MANIFEST_FILE} is unreadable ({e}); {fix}") from None
-    if not isinstance(manifest, dict):
-        raise CheckpointError(f"{who}: {ckpt_dir / MANIFEST_FILE} is not a JSON object; {fix}")
+    manifest = read_weights_manifest(ckpt_dir, who, f"{fix} (or point policy.out to its dir)", fix)
     kind = manifest.get("kind")
     have = BY_KIND.get(kind) if isinstance(kind, str) else None
     if have is None or (want is not None and have is not want):
