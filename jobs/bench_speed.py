@@ -3,16 +3,19 @@
     python jobs/bench_speed.py env=pointmaze-medium tasks=[1,2,3,4,5] seeds=[0,1]
     python jobs/bench_speed.py env=pointmaze-giant methods=[mctd,fast-mctd] eval.episode_time_limit=600
     python jobs/bench_speed.py env=pointmaze-medium seeds=[0,1] store=main   # also keep the rows
+    python jobs/bench_speed.py env=cube-single methods=[mctd-replan,fast-mctd-replan] seeds=[0]   # robot arm
 
 With ``store=<run>`` every episode is also written as a result row to ``<eval.out>/<run>/``
 (the same rows jobs/eval.py writes with ``runner=local``), so the maze table can use them.
 
 For each method (default: mctd, p-mctd, s-mctd, fast-mctd, diffuser) every episode is run in this
 process with a LocalDenoiser on that method's checkpoint, interleaved per episode so load
-on the machine hits all methods alike. Prints success, mean planning time, the share of
-planning time inside the denoiser, and planning-time ratios against Fast-MCTD — ratios, not
+on the machine hits all methods alike; the episode is the env family's (``hooks_for(env).episodes``:
+mazes with their PD or ant controller, cubes with the arm's scripts and policy). Prints success,
+mean planning time, the share of planning time inside the denoiser, and planning-time ratios
+against Fast-MCTD (``fast-mctd``, else ``fast-mctd-replan``, else the last method) — ratios, not
 seconds, are what compare across machines (the paper: MCTD / Fast-MCTD = 264.2 / 2.4 =
-110x on PointMaze-giant).
+110x on PointMaze-giant; MCTD-Replan / Fast-MCTD-Replan = 9.2 / 3.0 = 3.1x on cube-single).
 """
 
 from __future__ import annotations
@@ -27,13 +30,18 @@ from fmctd_dist.config import load_config
 from fmctd_dist.denoiser.local import LocalDenoiser
 from fmctd_dist.device import set_threads
 from fmctd_dist.diffusion.checkpoint import load_checkpoint, normaliser_from_manifest
-from fmctd_dist.envs import make_env
-from fmctd_dist.evaluation.episode import describe, run_episode
-from fmctd_dist.evaluation.grid import missing, prepare, provenance
+from fmctd_dist.evaluation.episode import describe
+from fmctd_dist.evaluation.grid import missing, prepare, provenance, same_policy
 from fmctd_dist.evaluation.results import ResultStore
+from fmctd_dist.hooks import hooks_for
 from fmctd_dist.planners import make_planner
 
 DEFAULT_METHODS = ["mctd", "p-mctd", "s-mctd", "fast-mctd", "diffuser"]
+REFERENCES = ("fast-mctd", "fast-mctd-replan")  # the method the time ratios divide by, first present
+
+
+def reference(methods: list[str]) -> str:
+    return next((m for m in REFERENCES if m in methods), methods[-1])
 
 
 def build(method: str, overrides: list[str]):
@@ -61,18 +69,21 @@ def main(argv: list[str]) -> int:
         for cfg, _, prepared in setups.values():
             missing(prepared, results)
     set_threads(cfg0.eval.threads)
-    env = make_env(cfg0.env.name, cfg0.env.protocol)
+    episodes = {}  # per method: the family's env + controller (a method may set env.* or its policy)
+    for m, (cfg, _, prepared) in setups.items():
+        episodes[m] = hooks_for(cfg.env.name).episodes(cfg)
+        same_policy(prepared, episodes[m])
     rows: dict[str, list[dict]] = {m: [] for m in methods}
     t0 = time.time()
     for task in cfg0.eval.tasks:
         for seed in cfg0.eval.seeds:
             for m, (cfg, planner, prepared) in setups.items():
-                row = run_episode(cfg, env, planner, task, seed)
+                row = episodes[m].run(planner, task, seed)
                 rows[m].append(row)
                 if results is not None:
                     results.write({**row, **provenance(prepared, 0)})
                 print(describe(row), flush=True)
-    ref = "fast-mctd" if "fast-mctd" in rows else methods[-1]
+    ref = reference(methods)
     ref_time = np.mean([r["plan_time_s"] for r in rows[ref]])
     print(f"\n{cfg0.env.name}, tasks {cfg0.eval.tasks} x seeds {cfg0.eval.seeds}, torch threads "
           f"{torch.get_num_threads()}, {time.time() - t0:.0f}s total\n")

@@ -250,6 +250,36 @@ def test_other_methods_run_cube_episodes_without_a_planner_change(tiny_double, t
     check_row(rows[0], searched=method != "diffusion-forcing")
 
 
+@pytest.fixture(scope="module")
+def tiny_double_dense(tiny_double, tmp_path_factory):
+    """tiny_double's data and policy with a 2-step dense (jump=1) model: what MCTD-Replan, P-MCTD-Replan and
+    Diffusion Forcing load by default (their configs say jump=1; the cube value's warp is then env.warp_dense)."""
+    import torch
+
+    from fmctd_dist.data.registry import load_family_dataset
+    from fmctd_dist.data.windows import train_data
+    from fmctd_dist.diffusion.train import train
+
+    root = tmp_path_factory.mktemp("cube2dense")
+    args = [a for a in tiny_double if not a.startswith(("checkpoint=", "jump="))] + [f"checkpoint={root / 'ckpt'}"]
+    cfg = load_config(args + ["jump=1", "train.max_steps=2", "train.batch_size=4", "train.val_batches=1",
+                              "train.warmup=1"], method="mctd", serves=("cube",))
+    torch.manual_seed(0)
+    with torch.random.fork_rng():
+        train(cfg, train_data(cfg, load_family_dataset(cfg)), root / "ckpt", progress=False)
+    return args
+
+
+@pytest.mark.parametrize("method", ["diffusion-forcing", "mctd-replan", "p-mctd-replan"])
+def test_dense_methods_run_cube_episodes_on_their_own_jump(tiny_double_dense, tmp_path, method):
+    """The dense methods as configured (jump=1, 21 frame-stacked tokens per plan), not forced to jump=5."""
+    cfg = load_config([f"method={method}", *tiny_double_dense], serves=("cube",))
+    assert cfg.jump == 1 and hooks_for("cube-double").plan_rules(cfg).value.warp_threshold == cfg.env.warp_dense
+    rows = run_grid([f"method={method}", *tiny_double_dense, *SEARCH], tmp_path, "local")
+    check_row(rows[0], searched=method != "diffusion-forcing")
+    assert rows[0]["jump"] == 1
+
+
 # ---- bad inputs: one clear error before anything runs ----
 
 def test_a_missing_cube_policy_is_one_error_naming_the_training_command(tiny_double, tmp_path):
@@ -299,6 +329,29 @@ def test_eval_job_smoke_on_a_cube_env(tiny_double, tmp_path):
     assert "| fast-mctd-replan | cube-double | 1 |" in out.stdout
     assert (tmp_path / "smoke/fast-mctd-replan/cube-double/task=2/seed=0.parquet").is_file()
     assert (tmp_path / "smoke/fast-mctd-replan/cube-double/episode.png").stat().st_size > 10_000
+
+
+def test_bench_speed_runs_cube_episodes_side_by_side(tiny_double, tmp_path):
+    """jobs/bench_speed.py on a cube env: the family's episodes (arm scripts + policy), ratios against
+    fast-mctd-replan, and the rows kept with store=<run>."""
+    import os
+    import subprocess
+    import sys
+
+    from fmctd_dist.config import REPO_ROOT
+    from fmctd_dist.evaluation.results import ResultStore
+
+    words = ["methods=[s-mctd-replan,fast-mctd-replan]", *tiny_double, *SEARCH, "tasks=[1]", "seeds=[0]",
+             "env.max_steps=100", "env.replan_every=10", "eval.threads=1", f"eval.out={tmp_path}", "store=speed"]
+    out = subprocess.run([sys.executable, "jobs/bench_speed.py", *words], cwd=REPO_ROOT, capture_output=True,
+                         text=True, timeout=600, env={**os.environ, "OMP_NUM_THREADS": "1"})
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert "| method | success (%) | planning time (s) | time / fast-mctd-replan |" in out.stdout
+    lines = [ln for ln in out.stdout.splitlines() if ln.startswith(("| s-mctd-replan |", "| fast-mctd-replan |"))]
+    assert len(lines) == 2 and "| 1.0x |" in lines[1]
+    rows = ResultStore(tmp_path, "speed").rows(env="cube-double")
+    assert sorted(r["method"] for r in rows) == ["fast-mctd-replan", "s-mctd-replan"]
+    assert all(r["n_cubes"] == 2 and r["env_steps"] == 100 for r in rows)  # cube rows, from the cube episode
 
 
 def test_ideal_plans_job_smoke(tiny_double, tmp_path):
