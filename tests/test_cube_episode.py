@@ -303,6 +303,52 @@ def test_a_missing_cube_model_is_one_error_naming_the_training_command(tiny_doub
     assert "\n" not in str(e.value) and "python jobs/train.py env=cube-double jump=5" in str(e.value)
 
 
+@pytest.mark.parametrize("method", ["diffuser", "diffuser-replan"])
+def test_a_missing_cube_diffuser_is_one_error_naming_its_training_command(tmp_path, method):
+    """No cube Diffuser is shipped: asking for one names the missing dir and the jobs/train.py words that make it."""
+    import os
+    import subprocess
+    import sys
+
+    from fmctd_dist.config import REPO_ROOT
+
+    missing = tmp_path / "cube-single-diffuser"
+    out = subprocess.run([sys.executable, "jobs/eval.py", "env=cube-single", f"method={method}", f"checkpoint={missing}",
+                          "runner=local", "tasks=[1]", "seeds=[0]", f"eval.out={tmp_path}"], cwd=REPO_ROOT,
+                         capture_output=True, text=True, timeout=300, env={**os.environ, "OMP_NUM_THREADS": "1"})
+    err = out.stderr.strip()
+    assert out.returncode == 2 and err.startswith("error: ") and "\n" not in err and "Traceback" not in err
+    assert f"{missing} does not exist" in err
+    assert f"`python jobs/train.py env=cube-single model.kind=diffuser jump=1 train.out={missing}`" in err
+    assert not list(tmp_path.rglob("*.parquet"))
+
+
+def test_the_cube_diffuser_hint_trains_one_that_plans_cube_episodes(tiny_double, tmp_path):
+    """The suggested command, run as printed (the tiny config's words keep it smoke-sized), makes a cube Diffuser
+    that Diffuser-Replan then plans a whole cube episode with, through the same planner as the mazes."""
+    import os
+    import re
+    import subprocess
+
+    from fmctd_dist.config import REPO_ROOT
+    from fmctd_dist.evaluation.grid import prepare
+
+    args = [a for a in tiny_double if not a.startswith(("checkpoint=", "jump="))]
+    args += [f"checkpoint={tmp_path / 'ck'}", "model.unet_channels=[8,16]", "model.unet_edge_frames=2",
+             "train.max_steps=2", "train.batch_size=4", "train.val_batches=1", "train.val_every=0"]
+    cfg = load_config(["method=diffuser-replan", *args], serves=("cube",))
+    with pytest.raises(CheckpointError, match="does not exist") as e:
+        prepare(cfg)
+    (cmd,) = [c for c in re.findall(r"`([^`]+)`", str(e.value)) if "jobs/train.py" in c]
+    assert "env=cube-double" in cmd and "model.kind=diffuser" in cmd and f"train.out={tmp_path / 'ck'}" in cmd
+    done = subprocess.run(cmd, shell=True, cwd=REPO_ROOT, capture_output=True, text=True, timeout=600,
+                          env={**os.environ, "OMP_NUM_THREADS": "1"})
+    assert done.returncode == 0, done.stderr[-2000:]
+    rows = run_grid(["method=diffuser-replan", *args], tmp_path / "res", "local")
+    check_row(rows[0], searched=False)
+    assert rows[0]["method"] == "diffuser-replan"
+
+
 def test_a_maze_checkpoint_given_to_a_cube_env_is_one_error(tiny_double, tiny_checkpoint):
     from fmctd_dist.evaluation.grid import prepare
 
