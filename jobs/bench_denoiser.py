@@ -71,16 +71,20 @@ def cube_lines(ckpts: list[Path]) -> list[str]:
     return lines
 
 
-def peak_flops(dtype: torch.dtype, device: str = "cpu", n: int = 2048, reps: int = 5) -> float:
+CLOCKS = {"wall": time.perf_counter, "cpu": time.process_time}
+
+
+def peak_flops(dtype: torch.dtype, device: str = "cpu", n: int = 2048, reps: int = 5, clock: str = "wall") -> float:
     """FLOP/s of a large square matmul in ``dtype``: the machine's practical peak, measured in this run."""
+    now = CLOCKS[clock]
     a, b = torch.randn(n, n, device=device).to(dtype), torch.randn(n, n, device=device).to(dtype)
     a @ b
     _sync(device)
-    t0 = time.perf_counter()
+    t0 = now()
     for _ in range(reps):
         a @ b
     _sync(device)
-    return 2 * n**3 * reps / (time.perf_counter() - t0)
+    return 2 * n**3 * reps / (now() - t0)
 
 
 def transition_flops(model: DFTransformer, batch: int, tokens: int) -> float:
@@ -99,20 +103,27 @@ def _sync(device: str) -> None:
 
 
 def throughput(batches=(1, 25, 200), tokens=(11, 21, 51, 101), options=("fp32", "bf16"), width=128, layers=6,
-               reps=3, device: str = "cpu") -> list[str]:
+               reps=3, device: str = "cpu", clock: str = "wall") -> list[str]:
     """Guided transitions/s (jobs x transitions per second) and utilisation per option, side by side.
 
     Utilisation = counted FLOP/s over the peak of the option's dtype measured above (nanoGPT's MFU).
     A compiled option's first call (compilation) is left out of the timing, as a long run amortises it.
+    ``clock="cpu"`` times with this process's CPU time: on a shared machine (other jobs on the
+    cores) a one-thread run then measures the work per CPU second, which wall time cannot; it
+    is wrong for more than one torch thread or a GPU, and is refused there.
     """
+    if clock == "cpu" and (torch.get_num_threads() != 1 or not device.startswith("cpu")):
+        raise SystemExit(f"bench_denoiser --throughput clock=cpu needs device=cpu and one torch thread "
+                         f"(OMP_NUM_THREADS=1); here device={device}, threads={torch.get_num_threads()}")
+    now = CLOCKS[clock]
     from fmctd_dist.config import DiffusionConfig
     from fmctd_dist.denoiser.runtime import runtime_model
     from fmctd_dist.diffusion.sampler import make_consts, transition
 
     consts = make_consts(DiffusionConfig(), device)
-    peaks = {"fp32": peak_flops(torch.float32, device), "bf16": peak_flops(torch.bfloat16, device)}
+    peaks = {"fp32": peak_flops(torch.float32, device, clock=clock), "bf16": peak_flops(torch.bfloat16, device, clock=clock)}
     lines = [f"peak (2048^3 matmul): fp32 {peaks['fp32'] / 1e9:,.0f} GFLOP/s, bf16 {peaks['bf16'] / 1e9:,.0f} GFLOP/s; "
-             f"device {device}, torch threads {torch.get_num_threads()}", "",
+             f"device {device}, torch threads {torch.get_num_threads()}, clock {clock}", "",
              "| tokens | batch | " + " | ".join(f"{o}: jobs/s (util.)" for o in options) + " | best / fp32 |",
              "|---|---|" + "---|" * (len(options) + 1)]
     for t in tokens:
@@ -131,11 +142,11 @@ def throughput(batches=(1, 25, 200), tokens=(11, 21, 51, 101), options=("fp32", 
                 s, g = torch.zeros(b, 2, device=device), torch.ones(b, 2, device=device)
                 transition(model, consts, x, a, bl, scale, s, g)  # warm-up (and compilation)
                 _sync(device)
-                t0 = time.perf_counter()
+                t0 = now()
                 for _ in range(reps):
                     transition(model, consts, x, a, bl, scale, s, g)
                 _sync(device)
-                dt = (time.perf_counter() - t0) / reps
+                dt = (now() - t0) / reps
                 rates[opt] = b / dt
                 util = transition_flops(base, b, t) / dt / peaks[precision]
                 cells.append(f"{b / dt:,.0f} ({100 * util:.0f}%)")
@@ -149,8 +160,11 @@ def main(argv: list[str]) -> None:
     torch.manual_seed(0)
     if argv and argv[0] == "--throughput":
         # --throughput [options=fp32,bf16,compiled,bf16+compiled] [batches=1,25,200] [tokens=11,21,51,101] [device=cpu]
+        #   [clock=wall|cpu] [reps=3]
         kw = dict(a.split("=", 1) for a in argv[1:])
-        unknown = set(kw) - {"options", "batches", "tokens", "device"}
+        unknown = set(kw) - {"options", "batches", "tokens", "device", "clock", "reps"}
+        if kw.get("clock", "wall") not in CLOCKS:
+            raise SystemExit(f"bench_denoiser --throughput: clock={kw['clock']!r} is not one of {', '.join(CLOCKS)}")
         opts = tuple(kw.get("options", "fp32,bf16").split(","))
         if unknown or not set(opts) <= set(OPTIONS):
             raise SystemExit(f"bench_denoiser --throughput: unknown {sorted(unknown) or sorted(set(opts) - set(OPTIONS))}; "
@@ -158,7 +172,8 @@ def main(argv: list[str]) -> None:
         ints = lambda k, d: tuple(int(v) for v in kw.get(k, d).split(","))  # noqa: E731
         print("guided transitions/s (jobs x transitions per second) and utilisation, one run:")
         print("\n".join(throughput(ints("batches", "1,25,200"), ints("tokens", "11,21,51,101"), opts,
-                                   device=kw.get("device", "cpu"))))
+                                   reps=int(kw.get("reps", 3)), device=kw.get("device", "cpu"),
+                                   clock=kw.get("clock", "wall"))))
         return
     if argv and argv[0] == "--precision":
         for a in argv[1:]:

@@ -94,3 +94,21 @@ def test_options_are_config_and_recorded_in_rows():
     row = provenance(Prepared(bf16, Path("c"), "d" * 16, "cpu", config_hash(bf16), "sha"), 1)
     assert (row["precision"], row["compiled"]) == ("bf16", False)
     assert '"diffusion.precision": "bf16"' in row["config_json"]
+
+
+def test_throughput_bench_cpu_clock_runs_and_refuses_more_threads(monkeypatch):
+    """`bench_denoiser --throughput clock=cpu` (work per CPU second on a shared machine) prints its
+    table; with more than one torch thread process time is not one core's time, so it is refused."""
+    import importlib.util
+    from pathlib import Path
+
+    spec = importlib.util.spec_from_file_location("bench_denoiser", Path(__file__).parents[1] / "jobs/bench_denoiser.py")
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    monkeypatch.setattr(bench, "peak_flops", lambda *a, **k: 1e9)  # skip the 2048^3 matmul
+    lines = bench.throughput(batches=(2,), tokens=(3,), options=("fp32", "bf16"), width=16, layers=1, reps=1,
+                             clock="cpu")
+    assert "clock cpu" in lines[0] and lines[-1].startswith("| 3 | 2 |")
+    monkeypatch.setattr(torch, "get_num_threads", lambda: 2)
+    with pytest.raises(SystemExit, match="one torch thread"):
+        bench.throughput(batches=(2,), tokens=(3,), width=16, layers=1, reps=1, clock="cpu")
