@@ -107,10 +107,10 @@ def test_summary_plot_tick_labels_never_collide(times):
 
 
 def test_paper_cells_cover_the_robot_table():
-    """The cube rows print the paper's robot-table numbers beside ours (no std given there)."""
+    """The cube rows print the paper's robot-table numbers (with its stds) beside ours."""
     from fmctd_dist.evaluation.paper import paper_cell
 
-    assert paper_cell("fast-mctd-replan", "cube-single") == "100 / 3.0 s"
-    assert paper_cell("mctd-replan", "cube-triple") == "40 / 102.0 s"
+    assert paper_cell("fast-mctd-replan", "cube-single") == "100 ± 0 / 3.0 ± 0.2 s"
+    assert paper_cell("mctd-replan", "cube-triple") == "40 ± 21 / 102.0 ± 6.9 s"
     assert paper_cell("fast-mctd", "pointmaze-giant") == "100 ± 0 / 2.4 ± 0.1 s"
     assert paper_cell("fast-mctd", "cube-single") == "–"  # the paper ran only replanning searches on cubes

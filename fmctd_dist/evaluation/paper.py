@@ -23,18 +23,15 @@ PAPER_ANTMAZE: dict[str, dict[str, tuple[float, float, float, float]]] = {
     "s-mctd": {"medium": (94, 1, 12.5, 0.7), "large": (68, 13, 40.1, 2.6), "giant": (82, 14, 40.3, 2.9)},
     "fast-mctd": {"medium": (98, 6, 2.2, 0.1), "large": (77, 14, 2.2, 0.1), "giant": (90, 16, 2.5, 0.1)},
 }
-# Robot table (reference.md §13): success %, planning time s; the paper gives no standard deviations.
+# Robot table (the paper's tab:robot_result, its \graypm stds; reference.md §13 lists the means only).
 PAPER_CUBE: dict[str, dict[str, tuple[float, float | None, float, float | None]]] = {
-    "diffuser": {"single": (78, None, 6.3, None), "double": (12, None, 6.4, None), "triple": (8, None, 6.5, None)},
-    "diffuser-replan": {"single": (92, None, 21.4, None), "double": (12, None, 71.2, None),
-                        "triple": (4, None, 130.9, None)},
-    "diffusion-forcing": {"single": (100, None, 2.9, None), "double": (18, None, 15.2, None),
-                          "triple": (16, None, 15.9, None)},
-    "mctd-replan": {"single": (100, None, 9.2, None), "double": (78, None, 38.8, None), "triple": (40, None, 102.0, None)},
-    "p-mctd-replan": {"single": (100, None, 2.9, None), "double": (80, None, 6.5, None), "triple": (50, None, 11.4, None)},
-    "s-mctd-replan": {"single": (100, None, 8.5, None), "double": (75, None, 35.7, None), "triple": (42, None, 58.7, None)},
-    "fast-mctd-replan": {"single": (100, None, 3.0, None), "double": (77, None, 5.9, None),
-                         "triple": (50, None, 9.1, None)},
+    "diffuser": {"single": (78, 23, 6.3, 0.1), "double": (12, 10, 6.4, 0.1), "triple": (8, 10, 6.5, 0.1)},
+    "diffuser-replan": {"single": (92, 13, 21.4, 2.4), "double": (12, 13, 71.2, 5.1), "triple": (4, 8, 130.9, 11.6)},
+    "diffusion-forcing": {"single": (100, 0, 2.9, 0.2), "double": (18, 11, 15.2, 2.2), "triple": (16, 8, 15.9, 1.2)},
+    "mctd-replan": {"single": (100, 0, 9.2, 0.9), "double": (78, 11, 38.8, 4.7), "triple": (40, 21, 102.0, 6.9)},
+    "p-mctd-replan": {"single": (100, 0, 2.9, 0.2), "double": (80, 9, 6.5, 2.3), "triple": (50, 21, 11.4, 2.8)},
+    "s-mctd-replan": {"single": (100, 0, 8.5, 0.5), "double": (75, 3, 35.7, 18.2), "triple": (42, 11, 58.7, 33.0)},
+    "fast-mctd-replan": {"single": (100, 0, 3.0, 0.2), "double": (77, 11, 5.9, 1.7), "triple": (50, 16, 9.1, 1.8)},
 }
 # Visual PointMaze table (reference.md §14): success %, planning time s; no standard deviations given.
 _VISUAL = {"diffuser": (8, 0, 7.0, 6.7), "diffuser-replan": (8, 0, 26.4, 26.0), "diffusion-forcing": (66, 8, 14.5, 17.1),
