@@ -22,6 +22,8 @@ from fmctd_dist.errors import CheckpointError, ConfigError
 MEDIUM = "visual-pointmaze-medium"
 SHIPPED = REPO_ROOT / "checkpoints" / f"{MEDIUM}-h5"
 needs_shipped = pytest.mark.skipif(not (SHIPPED / "model.pt").exists(), reason=f"{SHIPPED} is not shipped")
+needs_latents = pytest.mark.skipif(not list((REPO_ROOT / "data").glob(f"{MEDIUM}-latents-*/latents.npz")),
+                                   reason="the medium latent store is not made (jobs/train_visual.py part=latents)")
 
 
 def _fake_dataset(d: int = 8, episodes: int = 2, steps: int = 1001):
@@ -222,3 +224,20 @@ def test_fast_mctd_runs_task1_seed0_with_the_shipped_models():
     if not row["success"]:
         pytest.xfail(f"not solved yet: {row['plan_status']} after {row['env_steps']} steps (docs/results.md 13.4)")
     pytest.fail("task 1 seed 0 is solved now: drop the xfail and assert success")
+
+
+@needs_shipped
+@needs_latents
+def test_plan_quality_reports_warps_and_manifold_distance():
+    """jobs/visual_plan_quality.py's measure on a small search: shapes and ranges of every statistic."""
+    from fmctd_dist.visual.plan_quality import nearest_distance, plan_quality
+
+    assert nearest_distance(np.array([[0.0, 0.0], [3.0, 4.0]]), np.array([[0.0, 1.0], [3.0, 0.0]])).tolist() == [1, 4]
+    cfg = load_config([f"env={MEDIUM}", "method=fast-mctd", "method.budget=10", "method.parallel=5"])
+    with torch_threads(1):
+        q = plan_quality(cfg, [3])
+    (row,) = q["tasks"]
+    assert row["task"] == 3 and row["plans"] == row["expansions"] >= 5
+    assert 0 <= row["warp_fraction"] <= 1 and row["median_max_step"] > 0 and row["median_first_step"] >= 0
+    assert row["median_nn_distance"] > 0 and 0 < q["real_val_median_nn_distance"] < 0.5
+    assert q["real_val_p99_5step_move"] <= q["real_val_max_5step_move"] < cfg.method.warp_threshold * 2
