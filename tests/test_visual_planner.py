@@ -241,3 +241,17 @@ def test_plan_quality_reports_warps_and_manifold_distance():
     assert 0 <= row["warp_fraction"] <= 1 and row["median_max_step"] > 0 and row["median_first_step"] >= 0
     assert row["median_nn_distance"] > 0 and 0 < q["real_val_median_nn_distance"] < 0.5
     assert q["real_val_p99_5step_move"] <= q["real_val_max_5step_move"] < cfg.method.warp_threshold * 2
+
+
+@needs_shipped
+def test_ideal_latent_plans_solve_task3_through_the_visual_episode():
+    """jobs/visual_ideal_plans.py: the encoded BFS path as the plan, run by the unchanged visual episode (chase
+    frames, VAE, inverse dynamics): the episode and controller can solve a task when the latents are real ones."""
+    import os
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, "jobs/visual_ideal_plans.py", f"env={MEDIUM}", "tasks=[3]"], cwd=REPO_ROOT,
+                         capture_output=True, text=True, timeout=600, env={**os.environ, "OMP_NUM_THREADS": "1"})
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert "task 3 seed 0: success" in out.stdout and "jump=5: 1/1 solved" in out.stdout
