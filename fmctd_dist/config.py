@@ -145,8 +145,10 @@ class EnvConfig:
     # cube envs (reference §13); 0 / [] = the method's setting (mazes leave them so)
     replan_every: int = spec(0, ge=0, why="env steps between replans for methods that replan; 0 = "
                                          "method.replan_every (cubes: 100 single, 200 double/triple)")
-    warp_dense: float = spec(0.0, ge=0, why="cube value warp threshold at jump=1 (1.0); 0 = method.warp_threshold")
-    warp_sparse: float = spec(0.0, ge=0, why="cube value warp threshold at jump>1 (2.0); 0 = method.warp_threshold")
+    warp_dense: float = spec(0.0, ge=0, why="cube value warp threshold at jump=1 (1.0), visual maze's on estimated "
+                                             "positions; 0 = method.warp_threshold")
+    warp_sparse: float = spec(0.0, ge=0, why="cube value warp threshold at jump>1 (2.0), visual maze's on estimated "
+                                              "positions; 0 = method.warp_threshold")
     object_scales: list[float] = spec(factory=list, ge=0, each=True,
                                       why="guidance scales per unsolved object, e.g. [1, 2, 4] (cubes)")
 

@@ -190,6 +190,10 @@ def test_bad_inputs_are_one_clear_error_each(tmp_path):
     bare = _copy_planner(tmp_path, latents=None)
     with pytest.raises(CheckpointError, match=r"no latents.vae_digest.*jobs/train.py env=visual-pointmaze-medium"):
         hooks.check_episodes(load_config([f"env={MEDIUM}", "jump=5", f"checkpoint={bare}"]))
+    # the value's warp threshold on estimated positions: the maze's by default, env.warp_sparse when set
+    assert hooks.plan_rules(cfg).value.maze.warp_threshold == cfg.method.warp_threshold == 2.0
+    wide = load_config([f"env={MEDIUM}", "jump=5", "env.warp_sparse=8.0"])
+    assert hooks.plan_rules(wide).value.maze.warp_threshold == 8.0
     # latents of the wrong size handed to the value's estimator
     with pytest.raises(CheckpointError, match="8-D latents"):
         hooks.plan_rules(cfg).value.positions(np.zeros((2, 5, 3)))

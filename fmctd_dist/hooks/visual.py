@@ -90,9 +90,16 @@ def _positions(cfg: Config):
     return Positions(net)
 
 
+def warp_threshold(cfg: Config) -> float:
+    """The value's warp threshold on estimated positions: ``env.warp_sparse`` (jump > 1) / ``env.warp_dense``
+    (jump 1) when set, else the maze's ``method.warp_threshold`` (0 = unset, as for the cubes)."""
+    w = cfg.env.warp_dense if cfg.jump == 1 else cfg.env.warp_sparse
+    return float(w or cfg.method.warp_threshold)
+
+
 def plan_rules(cfg: Config) -> VisualRules:
     m = cfg.method
-    value = VisualValue(_positions(cfg), MazeValue(float(m.warp_threshold), float(m.goal_radius)))
+    value = VisualValue(_positions(cfg), MazeValue(warp_threshold(cfg), float(m.goal_radius)))
     return VisualRules(tuple(float(s) for s in m.guidance_scales), float(m.guidance_scale), value)
 
 

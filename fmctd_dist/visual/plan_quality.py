@@ -41,6 +41,7 @@ def plan_quality(cfg: Config, tasks: list[int], seed: int = 0) -> dict[str, Any]
     from fmctd_dist.denoiser.local import LocalDenoiser
     from fmctd_dist.diffusion.checkpoint import normaliser_from_manifest, read_manifest
     from fmctd_dist.hooks import hooks_for
+    from fmctd_dist.hooks.visual import warp_threshold
     from fmctd_dist.planners import make_planner
     from fmctd_dist.planners.base import plan_seed
 
@@ -69,7 +70,7 @@ def plan_quality(cfg: Config, tasks: list[int], seed: int = 0) -> dict[str, Any]
         nn = nearest_distance(norm.normalise(plans.reshape(-1, plans.shape[-1])), ref)
         rows.append({"task": task, "status": out.status, "stop_reason": r.stop_reason, "expansions": r.expansions,
                      "plan_time_s": round(out.plan_time_s, 2), "plans": len(plans),
-                     "warp_fraction": float((steps[:, :-1].max(1) > cfg.method.warp_threshold).mean()),
+                     "warp_fraction": float((steps[:, :-1].max(1) > warp_threshold(cfg)).mean()),
                      "median_max_step": float(np.median(steps[:, :-1].max(1))),
                      "median_first_step": float(np.median(steps[:, 0])),
                      "median_closest_to_goal": float(np.median(to_goal)),
@@ -79,7 +80,7 @@ def plan_quality(cfg: Config, tasks: list[int], seed: int = 0) -> dict[str, Any]
     real_nn = nearest_distance(norm.normalise(real.reshape(-1, real.shape[-1])), ref)
     return {"checkpoint": shown(cfg.checkpoint_dir()), "digest": manifest["digest"],
             "train_steps": manifest.get("train_steps"), "val_loss": manifest.get("final_losses", {}).get("val"),
-            "warp_threshold": cfg.method.warp_threshold, "tasks": rows,
+            "warp_threshold": warp_threshold(cfg), "tasks": rows,
             "real_val_median_nn_distance": float(np.median(real_nn)),
             "real_val_max_5step_move": float(real_moves.max()),
             "real_val_p99_5step_move": float(np.percentile(real_moves, 99))}
