@@ -82,11 +82,13 @@ def test_shipped_diffuser_without_its_edge_frames_is_one_clear_error():
 
 
 @pytest.mark.slow
-def test_fast_mctd_replan_with_the_shipped_cube_model_and_policy_solves_cube_single_task1_seed0():
-    """Issue 20's smoke test: the shipped cube-single-h5 model + the shipped cube policy, in process."""
+@pytest.mark.parametrize("method", ["fast-mctd-replan", "mctd-replan"])
+def test_replanning_search_with_the_shipped_cube_model_and_policy_solves_cube_single_task1_seed0(method):
+    """Issue 20's smoke test: the shipped cube-single-h5 (Fast-MCTD-Replan) or dense cube-single-h1 (MCTD-Replan)
+    model + the shipped cube policy, in process."""
     from fmctd_dist.hooks import hooks_for
 
-    cfg = load_config(["method=fast-mctd-replan", "env=cube-single"])
+    cfg = load_config([f"method={method}", "env=cube-single"])
     model, manifest = load_checkpoint(cfg.checkpoint_dir(), cfg)
     with torch_threads(2):
         planner = make_planner(cfg, LocalDenoiser(model, cfg.diffusion, "cpu", cfg.ray.micro_batch),
