@@ -204,3 +204,17 @@ def test_ray_job_submit(tiny_checkpoint, ray_cluster, tmp_path):
         except subprocess.TimeoutExpired:
             os.killpg(head.pid, signal.SIGKILL)
         shutil.rmtree(temp, ignore_errors=True)
+
+
+def test_address_local_starts_a_private_cluster_at_nice_0(monkeypatch):
+    """`ray.address=local` starts a fresh cluster of ours: its workers at nice 0 (Ray's default 15 starved the
+    denoiser actors beside two training jobs), no dashboard, and the caller shuts it down."""
+    from fmctd_dist.evaluation import ray_runner
+
+    calls = []
+    monkeypatch.delenv("RAY_worker_niceness", raising=False)
+    monkeypatch.setattr(ray_runner.ray, "is_initialized", lambda: False)
+    monkeypatch.setattr(ray_runner.ray, "init", lambda **kw: calls.append(kw))
+    assert ray_runner.connect("local") is True
+    assert calls[0]["address"] == "local" and calls[0]["include_dashboard"] is False
+    assert os.environ["RAY_worker_niceness"] == "0"

@@ -215,10 +215,15 @@ def local_cluster_env() -> None:
 
 def connect(address: str = "") -> bool:
     """Join ``address``, else a running cluster (RAY_ADDRESS / ``ray job submit`` / ``ray start``),
-    else start a local one. Returns True when this call started Ray (the caller shuts it down)."""
+    else start a local one; ``address="local"`` always starts a private one (workers at nice 0, as
+    every cluster we start). Returns True when this call started Ray (the caller shuts it down)."""
     if ray.is_initialized():
         return False
     quiet = {"logging_level": logging.ERROR, "log_to_driver": False}
+    if address == "local":  # a fresh private cluster, even beside a running one: ours, so nice 0 and shut down after
+        local_cluster_env()
+        ray.init(address="local", include_dashboard=False, **quiet)
+        return True
     if address or os.environ.get("RAY_ADDRESS"):
         ray.init(address=address or None, **quiet)
         return False
