@@ -151,6 +151,10 @@ class EnvConfig:
                                               "positions; 0 = method.warp_threshold")
     object_scales: list[float] = spec(factory=list, ge=0, each=True,
                                       why="guidance scales per unsolved object, e.g. [1, 2, 4] (cubes)")
+    # cubes: the scripted pre-position also turns the open gripper to the target cube's yaw (mod 90 degrees,
+    # the shortest turn, as OGBench's CubePlanOracle does), so the fingers close on faces, not corners.
+    # false = the authors' rule (move, never turn); docs/results.md 12.5
+    preposition_yaw: bool = False
 
 
 @dataclass

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from fmctd_dist.config import load_config
-from fmctd_dist.control.cube_scripts import ABOVE, EFFECTOR, PrePosition, Release
+from fmctd_dist.control.cube_scripts import ABOVE, EFFECTOR, PrePosition, Release, yaw_offset
 from fmctd_dist.envs.cube import CubeEpisodes
 from fmctd_dist.errors import CheckpointError, ConfigError
 from fmctd_dist.evaluation.cube_failures import DROPPED, KNOCKED, PLANNING_TIME_OUT, TIME_OUT, WRONG_CUBE, why_failed
@@ -101,6 +101,36 @@ def test_pre_position_and_release_move_the_effector_where_intended(single):
             lifted = obs[EFFECTOR] - before
     assert lifted[2] > 0.5 and abs(lifted[0]) < lifted[2]  # 10 steps mostly up (5+ cm)
     assert obs[EFFECTOR][0] - before[0] > 1.0 and obs[17] < 0.3  # then 10+ cm away in +x, still open
+
+
+def test_pre_position_turns_to_the_cube_only_when_asked(single):
+    """env.preposition_yaw: a start 30-45 degrees off the cube ends face-on (mod 90); off, the actions are the
+    authors' rule bit for bit (yaw action 0) and the default config hash is the one old rows carry."""
+    from fmctd_dist.evaluation.identity import config_hash
+
+    obs0 = single.reset(4, seed=8).obs
+    assert 30 <= abs(np.degrees(yaw_offset(obs0, 0))) <= 45  # seed 8 starts ~43 degrees off
+    runs = {}
+    for turn in (None, 0):
+        obs = single.reset(4, seed=8).obs
+        pre, acts = PrePosition(single.state(obs), turn_to=turn), []
+        for k in range(pre.steps):
+            acts.append(pre.act(obs, k))
+            obs, _ = single.step(acts[-1])
+        runs[turn] = (np.array(acts), obs)
+    (old, _), (new, end) = runs[None], runs[0]
+    assert np.all(old[:, 3] == 0.0) and abs(np.degrees(yaw_offset(end, 0))) < 3.0
+    assert np.abs(new[:, 3]).max() == 1.0 and np.linalg.norm(end[EFFECTOR] - (single.state(obs0) + [0, 0, ABOVE])) < 0.3
+    obs = single.reset(4, seed=8).obs
+    pre = PrePosition(single.state(obs))
+    for k in range(pre.steps):  # the default is the old script: same actions for the same seed
+        a = pre.act(obs, k)
+        assert np.array_equal(a, old[k]) and np.array_equal(a, np.r_[np.clip((pre.target - obs[EFFECTOR]) / 0.5, -1, 1),
+                                                                       0.0, -1.0])
+        obs, _ = single.step(a)
+    cube = ["env=cube-single", "method=fast-mctd-replan"]
+    assert config_hash(load_config(cube, serves=("cube",))) == "40035edf105f5ce3"  # results/cube-methods-s9's rows
+    assert config_hash(load_config([*cube, "env.preposition_yaw=true"], serves=("cube",))) != "40035edf105f5ce3"
 
 
 # ---- target choice ----

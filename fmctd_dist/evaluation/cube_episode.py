@@ -4,7 +4,8 @@ Per segment:
 1. plan from the current cube xyz [3N] (obs units) to the goal;
 2. the target cube = the unsolved cube whose planned path is longest (kept while it is carried);
 3. on a new segment (the first plan, after a release, or when the target changes) the scripted
-   pre-position: ~30 steps moving the open gripper above the target's first planned position;
+   pre-position: ~30 steps moving the open gripper above the target's first planned position (and, with
+   ``env.preposition_yaw``, turning it to the target cube's yaw);
 4. the low-level policy carries the target: its subgoal is the target's planned position 10
    steps ahead, advanced when the cube comes within 1.0 (:class:`control.subgoal.SubgoalTracker`);
 5. when the target is within 0.2 of its goal the scripted release (10 steps lift while opening,
@@ -107,7 +108,7 @@ def run_cube_episode(cfg: Config, env: CubeEpisodes, planner: Planner, policy: C
         target = last_target if carrying else choose_target(plan, cubes_now, targets_left(rules, state, goal))
         chosen.append(target)
         if target != last_target:
-            script(PrePosition(plan[0, target]))
+            script(PrePosition(plan[0, target], turn_to=target if cfg.env.preposition_yaw else None))
             last_target = target
         tracker = SubgoalTracker(plan[:, target], SUBGOAL_AHEAD, SUBGOAL_RADIUS, dim=3)
         k = 0
