@@ -52,6 +52,13 @@ def run_episode(cfg: Config, env: PointMaze, planner: Planner, task: int, seed: 
             steps += 1
             if success:
                 break
+    return maze_row(cfg, task, seed, success, timed_out, steps, tally, t_episode, first_plan, traj)
+
+
+def maze_row(cfg: Config, task: int, seed: int, success: bool, timed_out: bool, steps: int, tally: PlanTally,
+             t_episode: float, plan_xy: Any, traj: list) -> dict[str, Any]:
+    """The row of an episode moving a point in the maze plane (point, ant, visual point): the same columns,
+    so grids, tables, plots and reports read any of them. ``plan_xy``: the first plan's (x, y) [N, 2]."""
     return {
         "method": cfg.method.name,
         "env": cfg.env.name,
@@ -62,7 +69,7 @@ def run_episode(cfg: Config, env: PointMaze, planner: Planner, task: int, seed: 
         "env_steps": steps,
         **tally.columns(),
         "episode_time_s": time.perf_counter() - t_episode,
-        "plan_xy": np.asarray(first_plan, np.float32).reshape(-1).tolist(),
+        "plan_xy": np.asarray(plan_xy, np.float32).reshape(-1).tolist(),
         "traj_xy": np.asarray(traj, np.float32).reshape(-1).tolist(),
     }
 

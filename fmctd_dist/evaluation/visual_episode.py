@@ -20,6 +20,7 @@ import numpy as np
 
 from fmctd_dist.config import Config
 from fmctd_dist.control.latent_path import InverseDynamics, LatentPathController
+from fmctd_dist.evaluation.episode import maze_row
 from fmctd_dist.evaluation.plan_tally import PlanTally
 from fmctd_dist.planners.base import Planner, plan_seed
 
@@ -56,17 +57,5 @@ def run_visual_episode(cfg: Config, env: Any, encode: Encoder, invdyn: InverseDy
             if success:
                 break
     plan_xy = positions(np.asarray(first_plan)) if first_plan is not None else np.zeros((0, 2))
-    return {
-        "method": cfg.method.name,
-        "env": cfg.env.name,
-        "task": int(task),
-        "seed": int(seed),
-        "success": bool(success and not timed_out),
-        "timed_out": timed_out,
-        "env_steps": steps,
-        **tally.columns(),
-        "episode_time_s": time.perf_counter() - t_episode,
-        "plan_xy": np.asarray(plan_xy, np.float32).reshape(-1).tolist(),
-        "traj_xy": np.asarray(traj, np.float32).reshape(-1).tolist(),
-        "goal_xy_estimate_error": float(np.linalg.norm(positions(z_goal) - env.goal)),
-    }
+    return {**maze_row(cfg, task, seed, success, timed_out, steps, tally, t_episode, plan_xy, traj),
+            "goal_xy_estimate_error": float(np.linalg.norm(positions(z_goal) - env.goal))}
