@@ -16,19 +16,21 @@ import numpy as np
 from fmctd_dist.config import Config
 from fmctd_dist.planners.base import Planner
 from fmctd_dist.search.actions import Actions, scale_actions
-from fmctd_dist.search.value_rule import MazeValue
+from fmctd_dist.search.value_rule import MazeValue, PlanValue
 
 
 @dataclass(frozen=True)
 class MazeRules:
+    """Guidance scales as the tree's children and one plan value; the visual maze reuses it with its value."""
+
     scales: tuple[float, ...]  # the tree's guidance scales (method.guidance_scales)
     fixed_scale: float  # method.guidance_scale of planners without search
-    value: MazeValue
+    value: PlanValue  # MazeValue here; VisualValue (estimated positions) for the visual maze
 
-    def tree(self, start: np.ndarray, goal: np.ndarray) -> tuple[Actions, MazeValue]:
+    def tree(self, start: np.ndarray, goal: np.ndarray) -> tuple[Actions, PlanValue]:
         return scale_actions(self.scales), self.value
 
-    def fixed(self, start: np.ndarray, goal: np.ndarray) -> tuple[Actions, MazeValue]:
+    def fixed(self, start: np.ndarray, goal: np.ndarray) -> tuple[Actions, PlanValue]:
         return scale_actions([self.fixed_scale]), self.value
 
 

@@ -20,27 +20,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from fmctd_dist.config import Config
 from fmctd_dist.errors import CheckpointError
+from fmctd_dist.hooks.maze import MazeRules
 from fmctd_dist.planners.base import Planner
-from fmctd_dist.search.actions import Actions, scale_actions
 from fmctd_dist.search.value_rule import MazeValue
 from fmctd_dist.visual.plan_value import VisualValue
-
-
-@dataclass(frozen=True)
-class VisualRules:
-    scales: tuple[float, ...]  # the tree's guidance scales (method.guidance_scales)
-    fixed_scale: float  # method.guidance_scale of planners without search
-    value: VisualValue
-
-    def tree(self, start: np.ndarray, goal: np.ndarray) -> tuple[Actions, VisualValue]:
-        return scale_actions(self.scales), self.value
-
-    def fixed(self, start: np.ndarray, goal: np.ndarray) -> tuple[Actions, VisualValue]:
-        return scale_actions([self.fixed_scale]), self.value
 
 
 @dataclass(frozen=True)
@@ -97,10 +82,10 @@ def warp_threshold(cfg: Config) -> float:
     return float(w or cfg.method.warp_threshold)
 
 
-def plan_rules(cfg: Config) -> VisualRules:
+def plan_rules(cfg: Config) -> MazeRules:
     m = cfg.method
     value = VisualValue(_positions(cfg), MazeValue(warp_threshold(cfg), float(m.goal_radius)))
-    return VisualRules(tuple(float(s) for s in m.guidance_scales), float(m.guidance_scale), value)
+    return MazeRules(tuple(float(s) for s in m.guidance_scales), float(m.guidance_scale), value)
 
 
 def guide_map(cfg: Config, manifest: dict[str, Any]):
