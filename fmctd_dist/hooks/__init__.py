@@ -73,6 +73,14 @@ def guide_map_for(cfg: "Config", manifest: dict[str, Any]) -> Any:
     return None if fn is None else fn(cfg, manifest)
 
 
+def warp_threshold(cfg: "Config") -> float:
+    """The plan value's warp threshold of families that set it per model density: ``env.warp_dense`` at
+    jump 1, ``env.warp_sparse`` above (cubes; the visual maze on estimated positions), else the maze's
+    ``method.warp_threshold`` (0 = unset)."""
+    w = cfg.env.warp_dense if cfg.jump == 1 else cfg.env.warp_sparse
+    return float(w or cfg.method.warp_threshold)
+
+
 def hooks_for(env_name: str) -> FamilyHooks:
     """The hook module of ``env_name``'s family (an unknown name or a family without hooks: one ConfigError)."""
     require_family(env_name, tuple(HOOKS), "the planner and episode runner")

@@ -16,6 +16,7 @@ import numpy as np
 
 from fmctd_dist.config import Config, resolve_path
 from fmctd_dist.errors import CheckpointError, ConfigError
+from fmctd_dist.hooks import warp_threshold
 from fmctd_dist.planners.base import Planner
 from fmctd_dist.search.actions import ALL, Actions, object_actions
 from fmctd_dist.search.cube_value import CubeValue
@@ -42,11 +43,6 @@ class CubeRules:
         for i in self.objects(start, goal):
             mask[0, 3 * i:3 * i + 3] = 1.0
         return Actions(np.array([self.fixed_scale], np.float32), np.array([ALL], np.int32), mask), self.value
-
-
-def warp_threshold(cfg: Config) -> float:
-    w = cfg.env.warp_dense if cfg.jump == 1 else cfg.env.warp_sparse
-    return float(w or cfg.method.warp_threshold)
 
 
 def plan_rules(cfg: Config) -> CubeRules:

@@ -22,6 +22,7 @@ from typing import Any
 
 from fmctd_dist.config import Config
 from fmctd_dist.errors import CheckpointError
+from fmctd_dist.hooks import warp_threshold
 from fmctd_dist.hooks.maze import MazeRules
 from fmctd_dist.planners.base import Planner
 from fmctd_dist.search.value_rule import MazeValue
@@ -73,13 +74,6 @@ def _positions(cfg: Config):
     prov = latent_provenance(manifest, cfg.checkpoint_dir())
     net, _ = load_estimator_net(cfg, prov["vae_digest"], int(prov["latent_dim"]))
     return Positions(net)
-
-
-def warp_threshold(cfg: Config) -> float:
-    """The value's warp threshold on estimated positions: ``env.warp_sparse`` (jump > 1) / ``env.warp_dense``
-    (jump 1) when set, else the maze's ``method.warp_threshold`` (0 = unset, as for the cubes)."""
-    w = cfg.env.warp_dense if cfg.jump == 1 else cfg.env.warp_sparse
-    return float(w or cfg.method.warp_threshold)
 
 
 def plan_rules(cfg: Config) -> MazeRules:

@@ -40,8 +40,7 @@ def plan_quality(cfg: Config, tasks: list[int], seed: int = 0) -> dict[str, Any]
     from fmctd_dist.data.visual_dataset import load_visual_dataset
     from fmctd_dist.denoiser.local import LocalDenoiser
     from fmctd_dist.diffusion.checkpoint import normaliser_from_manifest, read_manifest
-    from fmctd_dist.hooks import hooks_for
-    from fmctd_dist.hooks.visual import warp_threshold
+    from fmctd_dist.hooks import hooks_for, warp_threshold
     from fmctd_dist.planners import make_planner
     from fmctd_dist.planners.base import plan_seed
 
