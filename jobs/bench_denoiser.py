@@ -24,6 +24,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import torch
 
 from fmctd_dist.config import REPO_ROOT
@@ -50,7 +51,7 @@ def precision_lines(ckpt: Path, batch: int = 64, timesteps: tuple[int, ...] = ()
 
 
 OPTIONS = {"fp32": ("fp32", False), "bf16": ("bf16", False), "compiled": ("fp32", True),
-           "bf16+compiled": ("bf16", True)}  # name -> (diffusion.precision, diffusion.compile)
+           "bf16+compiled": ("bf16", True)}  # name -> (diffusion.precision, diffusion.compile), as denoiser.runtime.option_overrides
 
 
 def cube_lines(ckpts: list[Path]) -> list[str]:
@@ -103,9 +104,12 @@ def _sync(device: str) -> None:
 
 
 def throughput(batches=(1, 25, 200), tokens=(11, 21, 51, 101), options=("fp32", "bf16"), width=128, layers=6,
-               reps=3, device: str = "cpu", clock: str = "wall") -> list[str]:
+               reps=3, device: str = "cpu", clock: str = "wall", rounds: int = 5) -> list[str]:
     """Guided transitions/s (jobs x transitions per second) and utilisation per option, side by side.
 
+    Per cell every option is built and warmed up first, then timed in ``rounds`` interleaved
+    rounds of ``reps`` transitions (at least 100 jobs' worth) (option A, B, ..., A, B, ...); a cell reports each option's
+    median round, so a burst of load on a shared or virtual machine hits every option alike.
     Utilisation = counted FLOP/s over the peak of the option's dtype measured above (nanoGPT's MFU).
     A compiled option's first call (compilation) is left out of the timing, as a long run amortises it.
     ``clock="cpu"`` times with this process's CPU time: on a shared machine (other jobs on the
@@ -123,36 +127,46 @@ def throughput(batches=(1, 25, 200), tokens=(11, 21, 51, 101), options=("fp32", 
     consts = make_consts(DiffusionConfig(), device)
     peaks = {"fp32": peak_flops(torch.float32, device, clock=clock), "bf16": peak_flops(torch.bfloat16, device, clock=clock)}
     lines = [f"peak (2048^3 matmul): fp32 {peaks['fp32'] / 1e9:,.0f} GFLOP/s, bf16 {peaks['bf16'] / 1e9:,.0f} GFLOP/s; "
-             f"device {device}, torch threads {torch.get_num_threads()}, clock {clock}", "",
+             f"device {device}, torch threads {torch.get_num_threads()}, clock {clock}, median of {rounds} "
+             f"interleaved rounds x {reps} transitions", "",
              "| tokens | batch | " + " | ".join(f"{o}: jobs/s (util.)" for o in options) + " | best / fp32 |",
              "|---|---|" + "---|" * (len(options) + 1)]
     for t in tokens:
         for b in batches:
-            cells, rates = [], {}
+            x = torch.randn(b, t, 20, device=device)
+            a = torch.full((b, t), 30, device=device)
+            a[:, 0] = 0
+            bl = (a - 1).clamp(min=0)
+            scale = torch.full((b,), 1.0, device=device)
+            s, g = torch.zeros(b, 2, device=device), torch.ones(b, 2, device=device)
+            steps, bases = {}, {}
             for opt in options:
                 precision, compiled = OPTIONS[opt]
                 torch.manual_seed(0)
-                base = DFTransformer(20, t, width, layers, 4, 512).to(device).eval().requires_grad_(False)
-                model = runtime_model(base, precision, compiled)
-                x = torch.randn(b, t, 20, device=device)
-                a = torch.full((b, t), 30, device=device)
-                a[:, 0] = 0
-                bl = (a - 1).clamp(min=0)
-                scale = torch.full((b,), 1.0, device=device)
-                s, g = torch.zeros(b, 2, device=device), torch.ones(b, 2, device=device)
-                transition(model, consts, x, a, bl, scale, s, g)  # warm-up (and compilation)
-                _sync(device)
-                t0 = now()
-                for _ in range(reps):
-                    transition(model, consts, x, a, bl, scale, s, g)
-                _sync(device)
-                dt = (now() - t0) / reps
+                bases[opt] = DFTransformer(20, t, width, layers, 4, 512).to(device).eval().requires_grad_(False)
+                model = runtime_model(bases[opt], precision, compiled)
+                steps[opt] = (lambda m: lambda: transition(m, consts, x, a, bl, scale, s, g, force_grad=True))(model)
+                steps[opt]()  # warm-up (and compilation)
+            times: dict[str, list[float]] = {o: [] for o in options}
+            n = max(reps, 100 // b)  # small batches: enough transitions per round to time them
+            for _ in range(rounds):
+                for opt in options:
+                    _sync(device)
+                    t0 = now()
+                    for _ in range(n):
+                        steps[opt]()
+                    _sync(device)
+                    times[opt].append((now() - t0) / n)
+            cells, rates = [], {}
+            for opt in options:
+                dt = float(np.median(times[opt]))
                 rates[opt] = b / dt
-                util = transition_flops(base, b, t) / dt / peaks[precision]
+                util = transition_flops(bases[opt], b, t) / dt / peaks[OPTIONS[opt][0]]
                 cells.append(f"{b / dt:,.0f} ({100 * util:.0f}%)")
             best = max(rates, key=rates.get)
             ratio = f"{best} {rates[best] / rates['fp32']:.2f}x" if "fp32" in rates else "–"
             lines.append(f"| {t} | {b} | " + " | ".join(cells) + f" | {ratio} |")
+            print(lines[-1], file=sys.stderr, flush=True)  # progress; the table comes whole at the end
     return lines
 
 
@@ -160,9 +174,9 @@ def main(argv: list[str]) -> None:
     torch.manual_seed(0)
     if argv and argv[0] == "--throughput":
         # --throughput [options=fp32,bf16,compiled,bf16+compiled] [batches=1,25,200] [tokens=11,21,51,101] [device=cpu]
-        #   [clock=wall|cpu] [reps=3]
+        #   [clock=wall|cpu] [reps=3] [rounds=5]
         kw = dict(a.split("=", 1) for a in argv[1:])
-        unknown = set(kw) - {"options", "batches", "tokens", "device", "clock", "reps"}
+        unknown = set(kw) - {"options", "batches", "tokens", "device", "clock", "reps", "rounds"}
         if kw.get("clock", "wall") not in CLOCKS:
             raise SystemExit(f"bench_denoiser --throughput: clock={kw['clock']!r} is not one of {', '.join(CLOCKS)}")
         opts = tuple(kw.get("options", "fp32,bf16").split(","))
@@ -173,7 +187,7 @@ def main(argv: list[str]) -> None:
         print("guided transitions/s (jobs x transitions per second) and utilisation, one run:")
         print("\n".join(throughput(ints("batches", "1,25,200"), ints("tokens", "11,21,51,101"), opts,
                                    reps=int(kw.get("reps", 3)), device=kw.get("device", "cpu"),
-                                   clock=kw.get("clock", "wall"))))
+                                   clock=kw.get("clock", "wall"), rounds=int(kw.get("rounds", 5)))))
         return
     if argv and argv[0] == "--precision":
         for a in argv[1:]:

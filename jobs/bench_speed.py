@@ -4,6 +4,11 @@
     python jobs/bench_speed.py env=pointmaze-giant methods=[mctd,fast-mctd] eval.episode_time_limit=600
     python jobs/bench_speed.py env=pointmaze-medium seeds=[0,1] store=main   # also keep the rows
     python jobs/bench_speed.py env=cube-single methods=[mctd-replan,fast-mctd-replan] seeds=[0]   # robot arm
+    python jobs/bench_speed.py env=pointmaze-medium methods=[fast-mctd,fast-mctd+compiled,fast-mctd+bf16+compiled]
+
+A method may carry inference options after '+' (``bf16``, ``compiled``; denoiser.runtime): the same
+method on the same episodes with ``diffusion.precision=bf16`` and/or ``diffusion.compile=true``, so
+the time / fast-mctd column is the option's speed-up and the success column what it costs.
 
 With ``store=<run>`` every episode is also written as a result row to ``<eval.out>/<run>/``
 (the same rows jobs/eval.py writes with ``runner=local``), so the maze table can use them.
@@ -28,6 +33,7 @@ import torch
 from fmctd_dist.cli import run
 from fmctd_dist.config import load_config
 from fmctd_dist.denoiser.local import LocalDenoiser
+from fmctd_dist.denoiser.runtime import option_overrides
 from fmctd_dist.device import set_threads
 from fmctd_dist.diffusion.checkpoint import load_checkpoint, normaliser_from_manifest
 from fmctd_dist.evaluation.episode import describe
@@ -44,8 +50,9 @@ def reference(methods: list[str]) -> str:
     return next((m for m in REFERENCES if m in methods), methods[-1])
 
 
-def build(method: str, overrides: list[str]):
-    cfg = load_config(overrides + [f"method={method}"])
+def build(spec: str, overrides: list[str]):
+    method, _, options = spec.partition("+")
+    cfg = load_config(overrides + [f"method={method}"] + (option_overrides(options) if options else []))
     prepared = prepare(cfg)  # device, checkpoint present and uncorrupted
     model, manifest = load_checkpoint(prepared.checkpoint, cfg)
     denoiser = LocalDenoiser(model, cfg.diffusion, cfg.device, cfg.ray.micro_batch, manifest["digest"])

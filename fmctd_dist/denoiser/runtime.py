@@ -8,9 +8,15 @@
   forward runs under ``torch.autocast(bfloat16)``, which feeds matmuls and convolutions bf16
   and keeps normalisations in fp32. Buffers (the sinusoidal frequencies, v's sqrt(alphabar)
   tables) stay fp32: a bf16 frequency times a timestep of 999 would be off by radians.
-- ``compile``: ``torch.compile(dynamic=False)``. Micro-batches have one shape, so there is one
-  graph per (shape, grad mode). A compiled graph's bits may depend on the grad mode, so a
-  compiled denoiser runs every transition through the guidance (grad) path, guided or not,
+- ``compile``: the whole guided estimate (forward, goal term and its gradient to the input,
+  ``sampler.functional_guided_estimate``) is one ``torch.compile(dynamic=False, fullgraph=True)``
+  graph, with inductor's C++ wrapper. Compiling the network alone and differentiating it with
+  autograd outside gained nothing on this CPU (section 6 of docs/results.md): at batch 1 the time
+  is per-op overhead of forward *and* backward, so both must be inside the graph. Micro-batches
+  have one shape, so there is one graph per model and shape; each RuntimeModel compiles its own
+  copy of the function, so dynamo's recompile limit counts shapes, not models, and hitting it
+  is an error rather than a silent fall-back to eager (which would change a plan's bits). A
+  compiled denoiser runs every transition through this guided graph, guided or not (scale 0),
   which keeps a job's bits independent of the micro-batch it lands in (design §4).
 
 Within one option a plan stays a pure function of (config, checkpoint, seed); across options
@@ -19,8 +25,13 @@ the bits differ (bf16 by ~1e-2 relative), which is why the option is part of the
 
 from __future__ import annotations
 
+import types
+
 import torch
 from torch import nn
+
+from fmctd_dist.diffusion.sampler import functional_guided_estimate
+from fmctd_dist.errors import ConfigError
 
 PRECISIONS = ("fp32", "bf16")  # same names as config.PRECISIONS
 # Layers whose parameters are stored in bf16; normalisations keep fp32 parameters (CPU layer/group
@@ -55,9 +66,59 @@ class RuntimeModel(nn.Module):
         return out.float()
 
 
+# the inference options by name, as the benches spell them ("bf16+compiled"): config overrides
+OPTION_OVERRIDES = {"fp32": [], "bf16": ["diffusion.precision=bf16"], "compiled": ["diffusion.compile=true"]}
+
+
+def option_overrides(name: str) -> list[str]:
+    """Config overrides of an option name: ``fp32``, ``bf16``, ``compiled`` or a '+' join of them."""
+    parts = name.split("+")
+    bad = [p for p in parts if p not in OPTION_OVERRIDES]
+    if bad:
+        raise ConfigError(f"inference option {name!r}: {bad} not among {list(OPTION_OVERRIDES)}; "
+                         f"join options with '+', e.g. bf16+compiled")
+    return [o for p in parts for o in OPTION_OVERRIDES[p]]
+
+
+# inductor options of the compiled step: the C++ wrapper calls kernels without Python in between
+COMPILE_OPTIONS = {"cpp_wrapper": True}
+
+
+def _fresh_copy(f: types.FunctionType) -> types.FunctionType:
+    """``f`` with new code objects, nested ones included: dynamo keeps its graphs and counts
+    recompiles per code object, so each copy has its own cache."""
+
+    def fresh(code: types.CodeType) -> types.CodeType:
+        consts = tuple(fresh(c) if isinstance(c, types.CodeType) else c for c in code.co_consts)
+        return code.replace(co_consts=consts, co_name=code.co_name)
+
+    return types.FunctionType(fresh(f.__code__), f.__globals__, f.__name__, f.__defaults__, f.__closure__)
+
+
+class CompiledStep:
+    """The guided estimate of one network as a compiled graph (``sampler.guided_estimate`` calls it)."""
+
+    def __init__(self, net: nn.Module):
+        torch._dynamo.config.fail_on_recompile_limit_hit = True  # never fall back to eager silently
+        self.net = net
+        # compiled as a plain function (a functools.partial would be compiled through one shared wrapper frame)
+        self.fn = torch.compile(_fresh_copy(functional_guided_estimate), dynamic=False, fullgraph=True,
+                                options=COMPILE_OPTIONS)
+
+    def __call__(self, *args) -> tuple[torch.Tensor, torch.Tensor]:
+        with torch.no_grad():  # one grad mode, one graph: no input requires grad, func.grad does the rest
+            return self.fn(self.net, *args)
+
+
 def runtime_model(model: nn.Module, precision: str = "fp32", compile: bool = False) -> nn.Module:
-    """``model`` (eval mode, no parameter grads) prepared for inference; fp32 eager returns it as is."""
+    """``model`` (eval mode, no parameter grads) prepared for inference; fp32 eager returns it as is.
+
+    With ``compile`` the returned module carries ``guided_estimate`` (a :class:`CompiledStep`);
+    calling the module itself stays eager (the sampler takes the compiled step for every transition).
+    """
     if precision == "fp32" and not compile:
         return model
-    wrapped: nn.Module = RuntimeModel(model, precision)
-    return torch.compile(wrapped, dynamic=False) if compile else wrapped
+    wrapped = RuntimeModel(model, precision)
+    if compile:
+        wrapped.guided_estimate = CompiledStep(wrapped)
+    return wrapped
