@@ -104,7 +104,7 @@ def _sync(device: str) -> None:
 
 
 def throughput(batches=(1, 25, 200), tokens=(11, 21, 51, 101), options=("fp32", "bf16"), width=128, layers=6,
-               reps=3, device: str = "cpu", clock: str = "wall", rounds: int = 5) -> list[str]:
+               reps=3, device: str = "cpu", clock: str = "wall", rounds: int = 5, echo: bool = False) -> list[str]:
     """Guided transitions/s (jobs x transitions per second) and utilisation per option, side by side.
 
     Per cell every option is built and warmed up first, then timed in ``rounds`` interleaved
@@ -126,11 +126,14 @@ def throughput(batches=(1, 25, 200), tokens=(11, 21, 51, 101), options=("fp32", 
 
     consts = make_consts(DiffusionConfig(), device)
     peaks = {"fp32": peak_flops(torch.float32, device, clock=clock), "bf16": peak_flops(torch.bfloat16, device, clock=clock)}
-    lines = [f"peak (2048^3 matmul): fp32 {peaks['fp32'] / 1e9:,.0f} GFLOP/s, bf16 {peaks['bf16'] / 1e9:,.0f} GFLOP/s; "
+    lines: list[str] = []
+    lines += [f"peak (2048^3 matmul): fp32 {peaks['fp32'] / 1e9:,.0f} GFLOP/s, bf16 {peaks['bf16'] / 1e9:,.0f} GFLOP/s; "
              f"device {device}, torch threads {torch.get_num_threads()}, clock {clock}, median of {rounds} "
              f"interleaved rounds x {reps} transitions", "",
              "| tokens | batch | " + " | ".join(f"{o}: jobs/s (util.)" for o in options) + " | best / fp32 |",
              "|---|---|" + "---|" * (len(options) + 1)]
+    if echo:
+        print("\n".join(lines), flush=True)
     for t in tokens:
         for b in batches:
             x = torch.randn(b, t, 20, device=device)
@@ -166,7 +169,8 @@ def throughput(batches=(1, 25, 200), tokens=(11, 21, 51, 101), options=("fp32", 
             best = max(rates, key=rates.get)
             ratio = f"{best} {rates[best] / rates['fp32']:.2f}x" if "fp32" in rates else "–"
             lines.append(f"| {t} | {b} | " + " | ".join(cells) + f" | {ratio} |")
-            print(lines[-1], file=sys.stderr, flush=True)  # progress; the table comes whole at the end
+            if echo:  # row by row, so a run stopped by a time limit keeps what it measured
+                print(lines[-1], flush=True)
     return lines
 
 
@@ -185,9 +189,9 @@ def main(argv: list[str]) -> None:
                              f"options are {', '.join(OPTIONS)}")
         ints = lambda k, d: tuple(int(v) for v in kw.get(k, d).split(","))  # noqa: E731
         print("guided transitions/s (jobs x transitions per second) and utilisation, one run:")
-        print("\n".join(throughput(ints("batches", "1,25,200"), ints("tokens", "11,21,51,101"), opts,
-                                   reps=int(kw.get("reps", 3)), device=kw.get("device", "cpu"),
-                                   clock=kw.get("clock", "wall"), rounds=int(kw.get("rounds", 5)))))
+        throughput(ints("batches", "1,25,200"), ints("tokens", "11,21,51,101"), opts, reps=int(kw.get("reps", 3)),
+                   device=kw.get("device", "cpu"), clock=kw.get("clock", "wall"), rounds=int(kw.get("rounds", 5)),
+                   echo=True)
         return
     if argv and argv[0] == "--precision":
         for a in argv[1:]:
