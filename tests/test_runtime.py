@@ -152,3 +152,21 @@ def test_compiled_step_matches_eager_guidance(variant):
     np.testing.assert_allclose(x0.numpy(), ref_x0.numpy(), rtol=1e-4, atol=1e-5)
     np.testing.assert_allclose(grad.numpy(), ref_grad.numpy(), rtol=1e-4, atol=1e-6)
     assert grad[0].abs().max() == 0 and grad[1:].abs().max() > 0  # scale 0: no pull; others pulled
+
+
+def test_compile_without_a_cxx_compiler_is_one_clear_error_before_anything_starts(monkeypatch):
+    """diffusion.compile on a CPU needs g++/clang++ for inductor: without one, prepare() (what every job
+    calls before an actor or episode starts) names the field and both fixes."""
+    import shutil
+
+    from fmctd_dist.errors import ConfigError
+    from fmctd_dist.evaluation.grid import prepare
+
+    monkeypatch.setattr(shutil, "which", lambda name: None)
+    monkeypatch.delenv("CXX", raising=False)
+    with pytest.raises(ConfigError, match=r"diffusion.compile=true.*apt-get install g\+\+.*diffusion.compile=false"):
+        prepare(load_config(["diffusion.compile=true"]))
+    from fmctd_dist.denoiser.runtime import check_compile
+
+    check_compile(False, "cpu")  # off: nothing needed
+    check_compile(True, "cuda")  # a GPU's kernels are triton's, not g++'s

@@ -25,6 +25,8 @@ the bits differ (bf16 by ~1e-2 relative), which is why the option is part of the
 
 from __future__ import annotations
 
+import os
+import shutil
 import types
 
 import torch
@@ -78,6 +80,17 @@ def option_overrides(name: str) -> list[str]:
         raise ConfigError(f"inference option {name!r}: {bad} not among {list(OPTION_OVERRIDES)}; "
                          f"join options with '+', e.g. bf16+compiled")
     return [o for p in parts for o in OPTION_OVERRIDES[p]]
+
+
+def check_compile(compile: bool, device: str) -> None:
+    """``diffusion.compile`` on a CPU needs a C++ compiler (inductor writes C++ kernels and, here, its
+    wrapper): without one, one clear error before any actor starts instead of a failure mid-plan."""
+    if not compile or not device.startswith("cpu"):
+        return
+    if not any(shutil.which(c) for c in (os.environ.get("CXX", ""), "g++", "c++", "clang++") if c):
+        raise ConfigError("diffusion.compile=true on device=cpu needs a C++ compiler for torch.compile's kernels "
+                          "and none was found (g++, c++, clang++ or $CXX); install one (apt-get install g++) "
+                          "or run with diffusion.compile=false")
 
 
 # inductor options of the compiled step: the C++ wrapper calls kernels without Python in between

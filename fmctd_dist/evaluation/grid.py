@@ -14,6 +14,7 @@ from typing import Any, Callable
 from tqdm.auto import tqdm
 
 from fmctd_dist.config import Config, git_sha
+from fmctd_dist.denoiser.runtime import check_compile
 from fmctd_dist.device import resolve_device, set_threads
 from fmctd_dist.diffusion.checkpoint import read_manifest, verify_checkpoint
 from fmctd_dist.errors import CheckpointError, ResultsError
@@ -39,6 +40,7 @@ class Prepared:
 def prepare(cfg: Config) -> Prepared:
     policy = hooks_for(cfg.env.name).check_episodes(cfg)  # e.g. the ant's or the arm's policy exists and fits
     device = str(resolve_device(cfg.device))
+    check_compile(cfg.diffusion.compile, device)  # a compiled denoiser's toolchain is there
     ckpt = cfg.checkpoint_dir()
     manifest = verify_checkpoint(ckpt, cfg)  # exists, well-typed, agrees with env/jump/model/n_tokens, sha256
     return Prepared(cfg, ckpt, manifest["digest"], device, config_hash(cfg), git_sha(), policy)
