@@ -11,7 +11,8 @@ method on the same episodes with ``diffusion.precision=bf16`` and/or ``diffusion
 the time / fast-mctd column is the option's speed-up and the success column what it costs.
 
 With ``store=<run>`` every episode is also written as a result row to ``<eval.out>/<run>/``
-(the same rows jobs/eval.py writes with ``runner=local``), so the maze table can use them.
+(the same rows jobs/eval.py writes with ``runner=local``), so the maze table can use them; a method
+with options (below) writes to ``<eval.out>/<run>+<options>/`` (e.g. ``main+compiled``).
 
 For each method (default: mctd, p-mctd, s-mctd, fast-mctd, diffuser) every episode is run in this
 process with a LocalDenoiser on that method's checkpoint, interleaved per episode so load
@@ -71,10 +72,11 @@ def main(argv: list[str]) -> int:
             rest.append(a)
     setups = {m: build(m, rest) for m in methods}  # every config and checkpoint checked up front
     cfg0 = next(iter(setups.values()))[0]
-    results = ResultStore(cfg0.eval.out, store) if store else None
-    if results is not None:  # refuse a store holding rows of another config or checkpoint, before any episode
-        for cfg, _, prepared in setups.values():
-            missing(prepared, results)
+    # rows are keyed by (method, env, task, seed): an option arm keeps its rows in its own run, "<store>+<options>",
+    # so that two configs of one method never share (or overwrite) a row file
+    stores = {m: ResultStore(cfg0.eval.out, store + m[len(m.partition("+")[0]):]) for m in methods} if store else {}
+    for m, st in stores.items():  # refuse a store holding rows of another config or checkpoint, before any episode
+        missing(setups[m][2], st)
     set_threads(cfg0.eval.threads)
     episodes = {}  # per method: the family's env + controller (a method may set env.* or its policy)
     for m, (cfg, _, prepared) in setups.items():
@@ -92,8 +94,8 @@ def main(argv: list[str]) -> int:
             for m, (cfg, planner, prepared) in setups.items():
                 row = episodes[m].run(planner, task, seed)
                 rows[m].append(row)
-                if results is not None:
-                    results.write({**row, **provenance(prepared, 0)})
+                if store:
+                    stores[m].write({**row, **provenance(prepared, 0)})
                 print(describe(row), flush=True)
     ref = reference(methods)
     ref_time = np.mean([r["plan_time_s"] for r in rows[ref]])

@@ -129,16 +129,22 @@ def test_bench_speed_prints_side_by_side_ratios(tiny_checkpoint):
     assert len(lines) == 2 and "| 1.0x |" in lines[1]
 
 
-def test_bench_speed_runs_inference_options_side_by_side(tiny_checkpoint):
+def test_bench_speed_runs_inference_options_side_by_side(tiny_checkpoint, tmp_path):
     """`method+option` runs the same method with diffusion.precision / diffusion.compile on the same
     episodes (the option's speed-up is its time ratio); an unknown option is one clear error."""
     args, _ = tiny_checkpoint
     common = [*args, "tasks=[3]", "seeds=[0]", "method.budget=6", "method.warp_threshold=1000"]
-    out = subprocess.run([sys.executable, "jobs/bench_speed.py", "methods=[p-mctd,p-mctd+bf16]", *common],
-                         cwd=REPO_ROOT, capture_output=True, text=True, timeout=600)
+    out = subprocess.run([sys.executable, "jobs/bench_speed.py", "methods=[p-mctd,p-mctd+bf16]", *common,
+                          f"eval.out={tmp_path}", "store=opt"], cwd=REPO_ROOT, capture_output=True, text=True,
+                         timeout=600)
     assert out.returncode == 0, out.stderr
     assert [line.split(" | ")[0] for line in out.stdout.splitlines() if line.startswith("| p-mctd")] == \
         ["| p-mctd", "| p-mctd+bf16"]
+    from fmctd_dist.evaluation.results import ResultStore
+
+    # one config per (run, method, env): the option arm's row lives in run "opt+bf16", not over the fp32 one
+    plain, bf16 = ResultStore(tmp_path, "opt").rows("p-mctd"), ResultStore(tmp_path, "opt+bf16").rows("p-mctd")
+    assert [r["precision"] for r in plain] == ["fp32"] and [r["precision"] for r in bf16] == ["bf16"]
     bad = subprocess.run([sys.executable, "jobs/bench_speed.py", "methods=[p-mctd+fp16]", *common],
                          cwd=REPO_ROOT, capture_output=True, text=True, timeout=600)
     assert bad.returncode == 2 and "fp16" in bad.stderr and "bf16+compiled" in bad.stderr
