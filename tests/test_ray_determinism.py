@@ -45,6 +45,11 @@ def pools(prepared, ray_cluster):
             made[n] = DenoiserPool.create(prepared, n)
         return made[n]
 
+    def release():  # free the cluster's CPUs for a pool of another config
+        for k in list(made):
+            made.pop(k).shutdown()
+
+    get.release = release
     yield get
     for pool in made.values():
         pool.shutdown()
@@ -169,3 +174,19 @@ def test_two_trees_sharing_the_pool_at_once(prepared, pools):
         assert_same((out, tr), refs[s])
     for d in drivers:
         ray.kill(d)
+
+
+@pytest.mark.slow
+def test_plan_identical_local_and_two_actors_under_bf16_and_compile(tiny_checkpoint, pools):
+    """Within one inference option (here both: bf16 weights and the compiled guided step) a plan is
+    still the same bits in process and over 2 actors, each of which compiles its own graph (issue 22)."""
+    args, _ = tiny_checkpoint
+    prep = prepare(load_config(args + SEARCH + ["diffusion.precision=bf16", "diffusion.compile=true"]))
+    ref = local_plan(prep)
+    pools.release()
+    pool = DenoiserPool.create(prep, 2)
+    try:
+        got = plan_with(prep, pool.denoiser())
+    finally:
+        pool.shutdown()
+    assert_same(got, ref)
