@@ -6,7 +6,9 @@
 Reads the run ``main`` (the maze tables: every method x PointMaze / AntMaze maze) and the ablation runs
 ``ablate-w/*``, ``ablate-ras/*``, ``ablate-leaf/*``, ``ablate-k/*``, ``ablate-h/*`` (made by
 ``jobs/eval.py ... eval.run=ablate-k/10`` etc.; the commands are in docs/results.md), and
-rewrites only the blocks between ``<!-- report:NAME -->`` markers. Also writes
+rewrites only the blocks between ``<!-- report:NAME -->`` markers. Runs cited by hand-written
+sections (cubes, visual maze, recipe and option benches: ``ARCHIVED``) are not tabulated here but
+their rows are archived with the rest. Also writes
 ``docs/eval_rows.parquet``: every row without its plan/trajectory arrays, so each number in the
 tables can be traced to its episodes from git alone. That file is also read back: the tables are
 its rows with each episode that ``results/`` also holds replaced by the fresh row, so a fresh
@@ -25,9 +27,15 @@ from fmctd_dist.config import REPO_ROOT, resolve_path
 from fmctd_dist.envs import maze_geometry
 from fmctd_dist.evaluation.plots import plot_ablation, plot_episode, plot_success_vs_time
 from fmctd_dist.evaluation.report import ABLATIONS, ANT_ENV_ORDER, ENV_ORDER, ablation_summary, ablation_table, fill_markers, \
-    load_rows, maze_table, merge_rows
+    load_rows, maze_table, merge_rows, row_key
 from fmctd_dist.evaluation.results import summarise
 from fmctd_dist.errors import ConfigError
+
+
+# run-name prefixes whose rows are archived in docs/eval_rows.parquet without a regenerated table
+ARCHIVED = ("cube-", "visual-", "pool", "recipe-", "s10-options")
+# per-step arrays left out of the archive (git keeps the scalars; results/ keeps the rest)
+TRAJECTORIES = ("plan_xy", "traj_xy", "plan_cubes", "traj_cubes", "traj_effector")
 
 
 def parse(argv: list[str]) -> dict[str, str]:
@@ -77,10 +85,15 @@ def main(argv: list[str]) -> int:
             if ab.knob in ("parallel", "jump"):
                 plot_ablation(ablation_summary(rows, ab.knob), ab.knob, figures / f"{ab.name}.png")
 
+    # runs cited by sections that are not regenerated from rows (cubes, visual maze, benches): their rows are
+    # kept in eval_rows.parquet too, so every number in docs/results.md traces to its episodes from git alone
+    archived = {row_key(r): r for r in committed + fresh if r["run"].startswith(ARCHIVED)}
+    all_rows += [archived[k] for k in sorted(archived)]
+
     text = fill_markers(doc.read_text(), sections)
     doc.write_text(text)
     if all_rows:
-        keys = [k for k in dict.fromkeys(k for r in all_rows for k in r) if k not in ("plan_xy", "traj_xy")]
+        keys = [k for k in dict.fromkeys(k for r in all_rows for k in r) if k not in TRAJECTORIES]
         pq.write_table(pa.table({k: [r.get(k) for r in all_rows] for k in keys}), lean_path)  # union of columns
     for name, body in sections.items():
         print(f"## {name}\n{body}\n")

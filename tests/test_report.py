@@ -114,3 +114,28 @@ def test_paper_cells_cover_the_robot_table():
     assert paper_cell("mctd-replan", "cube-triple") == "40 ± 21 / 102.0 ± 6.9 s"
     assert paper_cell("fast-mctd", "pointmaze-giant") == "100 ± 0 / 2.4 ± 0.1 s"
     assert paper_cell("fast-mctd", "cube-single") == "–"  # the paper ran only replanning searches on cubes
+
+
+def test_report_archives_rows_of_hand_written_sections_without_their_trajectories(tmp_path):
+    """jobs/report.py keeps the rows of runs cited by hand-written sections (cube, visual, benches) in
+    eval_rows.parquet, scalars only, beside the tabulated runs; uncited runs stay out."""
+    import subprocess
+    import sys
+
+    import pyarrow.parquet as pq
+
+    from fmctd_dist.config import REPO_ROOT
+
+    cube = {**row(1, 0, True, method="fast-mctd-replan", env="cube-single"), "plan_cubes": [0.1, 0.2],
+            "traj_cubes": [0.3], "goal_cubes": [1.0, 2.0, 3.0]}
+    ResultStore(tmp_path / "res", "cube-yaw-s9").write(cube)
+    ResultStore(tmp_path / "res", "scratch").write(row(2, 0, False))
+    doc = tmp_path / "docs" / "results.md"
+    doc.parent.mkdir()
+    doc.write_text("# Results\n")
+    out = subprocess.run([sys.executable, "jobs/report.py", f"results={tmp_path / 'res'}", f"doc={doc}",
+                          f"figures={tmp_path / 'fig'}"], cwd=REPO_ROOT, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    rows = pq.read_table(doc.parent / "eval_rows.parquet").to_pylist()
+    assert [(r["run"], r["env"]) for r in rows] == [("cube-yaw-s9", "cube-single")]
+    assert "plan_cubes" not in rows[0] and "traj_cubes" not in rows[0] and rows[0]["goal_cubes"] == [1.0, 2.0, 3.0]
