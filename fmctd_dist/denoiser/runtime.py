@@ -103,7 +103,7 @@ def _fresh_copy(f: types.FunctionType) -> types.FunctionType:
 
     def fresh(code: types.CodeType) -> types.CodeType:
         consts = tuple(fresh(c) if isinstance(c, types.CodeType) else c for c in code.co_consts)
-        return code.replace(co_consts=consts, co_name=code.co_name)
+        return code.replace(co_consts=consts)
 
     return types.FunctionType(fresh(f.__code__), f.__globals__, f.__name__, f.__defaults__, f.__closure__)
 
