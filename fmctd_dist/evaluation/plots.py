@@ -66,16 +66,18 @@ def success_vs_time_figure(summary: list[dict[str, Any]]):
 
     Planning times spanning less than 4x get a linear axis (a log axis over 4.5-4.6 s has
     only colliding minor labels); wider spans a log axis labelled at 1-2-5 steps. Each method
-    (and config variant) has its own colour in the legend.
+    has its own colour in the legend; its config variants are separate points in that colour.
     """
     fig, ax = plt.subplots(figsize=(8, 4))
     envs = sorted({s["env"] for s in summary}, key=lambda e: (ENV_NAMES.index(e) if e in ENV_NAMES else 99, e))
     markers = dict(zip(envs, "osD^vP<>"))
-    methods = list(dict.fromkeys(label(s) for s in summary))
-    colors = {m: plt.get_cmap("tab10")(i % 10) for i, m in enumerate(methods)}  # one colour per method
+    # one colour per method; a method's config variants (the table's "[config ...]" lines) share it
+    base = lambda s: label(s).split(" [")[0]  # noqa: E731
+    methods = list(dict.fromkeys(base(s) for s in summary))
+    colors = {m: plt.get_cmap("tab10")(i % 10) for i, m in enumerate(methods)}
     for s in summary:
         ax.errorbar(s["plan_time_s"], s["success"], xerr=s["plan_time_std"], yerr=s["success_std"],
-                    marker=markers[s["env"]], color=colors[label(s)], capsize=3, ls="none")
+                    marker=markers[s["env"]], color=colors[base(s)], capsize=3, ls="none")
     for m in methods:
         ax.plot([], [], "s", color=colors[m], label=m)
     for env in envs:
