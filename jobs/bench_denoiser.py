@@ -28,6 +28,7 @@ import numpy as np
 import torch
 
 from fmctd_dist.config import REPO_ROOT
+from fmctd_dist.denoiser.runtime import option_settings
 from fmctd_dist.diffusion.model import DFTransformer
 from fmctd_dist.evaluation.plan_quality import plan_quality, precision
 from fmctd_dist.families import family
@@ -50,8 +51,8 @@ def precision_lines(ckpt: Path, batch: int = 64, timesteps: tuple[int, ...] = ()
     return lines
 
 
-OPTIONS = {"fp32": ("fp32", False), "bf16": ("bf16", False), "compiled": ("fp32", True),
-           "bf16+compiled": ("bf16", True)}  # name -> (diffusion.precision, diffusion.compile), as denoiser.runtime.option_overrides
+# name -> (diffusion.precision, diffusion.compile)
+OPTIONS = {n: option_settings(n) for n in ("fp32", "bf16", "compiled", "bf16+compiled")}
 
 
 def cube_lines(ckpts: list[Path]) -> list[str]:
@@ -108,8 +109,8 @@ def throughput(batches=(1, 25, 200), tokens=(11, 21, 51, 101), options=("fp32", 
     """Guided transitions/s (jobs x transitions per second) and utilisation per option, side by side.
 
     Per cell every option is built and warmed up first, then timed in ``rounds`` interleaved
-    rounds of ``reps`` transitions (at least 100 jobs' worth) (option A, B, ..., A, B, ...); a cell reports each option's
-    median round, so a burst of load on a shared or virtual machine hits every option alike.
+    rounds (option A, B, ..., A, B, ...) of ``reps`` transitions, at least 100 jobs' worth; a cell
+    reports each option's median round, so a burst of load on a shared machine hits every option alike.
     Utilisation = counted FLOP/s over the peak of the option's dtype measured above (nanoGPT's MFU).
     A compiled option's first call (compilation) is left out of the timing, as a long run amortises it.
     ``clock="cpu"`` times with this process's CPU time: on a shared machine (other jobs on the
@@ -126,8 +127,7 @@ def throughput(batches=(1, 25, 200), tokens=(11, 21, 51, 101), options=("fp32", 
 
     consts = make_consts(DiffusionConfig(), device)
     peaks = {"fp32": peak_flops(torch.float32, device, clock=clock), "bf16": peak_flops(torch.bfloat16, device, clock=clock)}
-    lines: list[str] = []
-    lines += [f"peak (2048^3 matmul): fp32 {peaks['fp32'] / 1e9:,.0f} GFLOP/s, bf16 {peaks['bf16'] / 1e9:,.0f} GFLOP/s; "
+    lines = [f"peak (2048^3 matmul): fp32 {peaks['fp32'] / 1e9:,.0f} GFLOP/s, bf16 {peaks['bf16'] / 1e9:,.0f} GFLOP/s; "
              f"device {device}, torch threads {torch.get_num_threads()}, clock {clock}, median of {rounds} "
              f"interleaved rounds x {reps} transitions", "",
              "| tokens | batch | " + " | ".join(f"{o}: jobs/s (util.)" for o in options) + " | best / fp32 |",

@@ -68,18 +68,25 @@ class RuntimeModel(nn.Module):
         return out.float()
 
 
-# the inference options by name, as the benches spell them ("bf16+compiled"): config overrides
-OPTION_OVERRIDES = {"fp32": [], "bf16": ["diffusion.precision=bf16"], "compiled": ["diffusion.compile=true"]}
+# the inference options by name, as the benches spell them ("bf16+compiled")
+OPTION_NAMES = ("fp32", "bf16", "compiled")
+
+
+def option_settings(name: str) -> tuple[str, bool]:
+    """(diffusion.precision, diffusion.compile) of an option name: ``fp32``, ``bf16``, ``compiled`` or a
+    '+' join of them."""
+    parts = name.split("+")
+    bad = [p for p in parts if p not in OPTION_NAMES]
+    if bad:
+        raise ConfigError(f"inference option {name!r}: {bad} not among {list(OPTION_NAMES)}; "
+                          f"join options with '+', e.g. bf16+compiled")
+    return ("bf16" if "bf16" in parts else "fp32"), "compiled" in parts
 
 
 def option_overrides(name: str) -> list[str]:
-    """Config overrides of an option name: ``fp32``, ``bf16``, ``compiled`` or a '+' join of them."""
-    parts = name.split("+")
-    bad = [p for p in parts if p not in OPTION_OVERRIDES]
-    if bad:
-        raise ConfigError(f"inference option {name!r}: {bad} not among {list(OPTION_OVERRIDES)}; "
-                         f"join options with '+', e.g. bf16+compiled")
-    return [o for p in parts for o in OPTION_OVERRIDES[p]]
+    """Config overrides of an option name (:func:`option_settings`)."""
+    precision, compile = option_settings(name)
+    return (["diffusion.precision=bf16"] if precision == "bf16" else []) + (["diffusion.compile=true"] if compile else [])
 
 
 def check_compile(compile: bool, device: str) -> None:
