@@ -8,7 +8,8 @@ Runs the grid fault-free (run ``ref``), then once per scenario with a fault inje
 thread once the first row exists, and prints one JSON line: per run, the rows (key, retries,
 plan/trajectory bits) plus what was killed.
 
-- ``node``: remove the worker node that holds the most of the run's actors (denoisers, drivers, env actors).
+- ``node``: at the first row, remove the worker node that holds the most of the episode pairs' actors (env
+  actors, drivers; then denoisers).
 - ``actor``: kill an env actor (mid-episode: all pairs are busy while the queue is not empty), then,
   after the third row, a planner driver.
 - ``job``: `ray job submit` jobs/eval.py to the head's job server, `ray job stop` it after its first
@@ -145,18 +146,24 @@ def main() -> None:
         killed: dict = {}
 
         def remove_busiest_worker():
-            if not wait_rows("node", 1):
-                return
+            # Find every actor's node first, then remove at the first row: then each pair still has an episode
+            # running or queued (4 keys, 2 pairs), so a removed pair actor always loses work. An idle denoiser
+            # on the removed node loses none (Ray restarts it), so the node is chosen by its pair actors.
+            deadline = time.monotonic() + 120
+            while (len(WHERE) < 2 or not POOLS) and time.monotonic() < deadline:
+                time.sleep(0.02)
             where = [("denoiser", i["node_id"]) for pool in POOLS for i in pool.infos]
             for refs in list(WHERE):
                 for ref, kind in refs:
                     try:
-                        where.append((kind, ray.get(ref, timeout=10)["node_id"]))
+                        where.append((kind, ray.get(ref, timeout=30)["node_id"]))
                     except Exception:  # noqa: BLE001 - an actor that is already gone
                         pass
+            if not wait_rows("node", 1):
+                return
             by_node = {w.node_id: w for w in workers}
             counts = {nid: [k for k, n in where if n == nid] for nid in by_node}
-            nid = max(counts, key=lambda n: len(counts[n]))
+            nid = max(counts, key=lambda n: (sum(k != "denoiser" for k in counts[n]), len(counts[n])))
             killed.update(node=nid[:8], actors=counts[nid], rows_before=n_rows("node"))
             cluster.remove_node(by_node[nid])
 

@@ -36,11 +36,16 @@ def run_scenarios(tiny_checkpoint, tmp_path, scenarios) -> dict:
     env = {k: v for k, v in os.environ.items() if not k.startswith("RAY_")}
     env["OMP_NUM_THREADS"] = "1"
     spec = json.dumps({"words": args + SEARCH, "out": str(tmp_path), "scenarios": scenarios})
-    try:
-        out = subprocess.run([sys.executable, "tests/multinode_faults.py", spec], cwd=REPO_ROOT, env=env,
-                             capture_output=True, text=True, timeout=400)
-    except subprocess.TimeoutExpired as e:
-        pytest.fail(f"multinode_faults.py ran over 400 s:\n{str(e.stdout)[-2000:]}\n{str(e.stderr)[-5000:]}")
+    # a simulated cluster that never came up (a GCS deadline on a loaded machine) is not a fault under test:
+    # start it once more
+    for _attempt in range(2):
+        try:
+            out = subprocess.run([sys.executable, "tests/multinode_faults.py", spec], cwd=REPO_ROOT, env=env,
+                                 capture_output=True, text=True, timeout=400)
+        except subprocess.TimeoutExpired as e:
+            pytest.fail(f"multinode_faults.py ran over 400 s:\n{str(e.stdout)[-2000:]}\n{str(e.stderr)[-5000:]}")
+        if out.returncode == 0 or "cluster up" in out.stderr:
+            break
     lines = [ln for ln in out.stdout.splitlines() if ln.startswith("REPORT ")]
     assert out.returncode == 0 and lines, out.stdout[-3000:] + out.stderr[-5000:]
     report = json.loads(lines[-1][len("REPORT "):])
@@ -71,8 +76,9 @@ def test_fault_free_reference(report):
 
 def test_worker_node_removed_mid_evaluation(report):
     killed = report["node_killed"]
-    assert killed["actors"], f"the removed node held none of the run's actors: {killed}"
-    assert killed["rows_before"] < len(KEYS)
+    # a pair actor removed while every pair still has an episode (running or queued) always loses work
+    assert set(killed["actors"]) - {"denoiser"}, f"the removed node held no env actor or driver: {killed}"
+    assert killed["rows_before"] <= len(KEYS) - 2, killed
     assert report["nodes_after"] == 2
     same_bits(report["node"], report["ref"])
     assert sum(r["retries"] for r in report["node"]) >= 1, "the lost work was not counted"
