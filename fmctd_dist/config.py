@@ -40,7 +40,7 @@ BETA_SCHEDULES = ("linear", "cosine")  # same names as diffusion.schedule.BETA_S
 MODEL_PARAMS = ("x0", "v", "v_offset")  # same names as diffusion.model.MODEL_PARAMS
 MODEL_NORMS = ("post", "pre")
 GUIDANCE_PATHS = ("input", "network")
-LR_SCHEDULES = ("constant", "cosine")
+LR_SCHEDULES = ("constant", "cosine", "wsd")
 PRECISIONS = ("fp32", "bf16")
 BUDGET_CLOCKS = ("wall", "cpu")
 
@@ -243,8 +243,13 @@ class TrainConfig:
     start_balance: float = spec(0.0, ge=0, le=1, why="windows are drawn with weight count(start cell)**-start_balance "
                                                      "(0 = uniform, the paper's; 1 = every start cell alike)")
     # constant (paper): warm-up then train.lr; cosine: warm-up then cosine decay to 0 at the run's end
-    # (train.max_steps, or train.time_budget_s of recorded wall time if that comes first)
+    # (train.max_steps, or train.time_budget_s of recorded wall time if that comes first); wsd
+    # (warm-up, stable, decay): constant, then linear to 0 over the last train.decay_steps steps before
+    # train.max_steps. Since only the tail depends on max_steps, a constant-LR run can be resumed as a
+    # wsd run with a nearer max_steps: it anneals from its own optimiser state.
     lr_schedule: str = spec("constant", choices=LR_SCHEDULES)
+    decay_steps: int = spec(0, ge=0, why="lr_schedule=wsd: the LR falls linearly to 0 over the last decay_steps "
+                                         "steps before train.max_steps (0 = the last 20%)")
     precision: str = spec("fp32", choices=PRECISIONS)  # fp32 (paper) | bf16: autocast for the training step
     time_budget_s: float = spec(0.0, ge=0, why="stop (with a checkpoint) once the run's recorded wall time reaches "
                                                 "this many seconds, so recipe arms get equal wall-clock; 0 = none")

@@ -25,6 +25,7 @@ pytestmark = pytest.mark.usefixtures("one_torch_thread")
 # lever word -> the manifest's config path; the first three change the model, the rest training
 LEVERS = {"model.param=v": ("model", "param"), "model.param=v_offset": ("model", "param"),
           "model.norm=pre": ("model", "norm"), "train.lr_schedule=cosine": ("train", "lr_schedule"),
+          "train.lr_schedule=wsd": ("train", "lr_schedule"),
           "train.precision=bf16": ("train", "precision"),
           "diffusion.guidance_path=network": ("diffusion", "guidance_path")}
 MODEL_LEVERS = ("model.param=v", "model.param=v_offset", "model.norm=pre")
@@ -180,6 +181,25 @@ def test_cosine_lr_decays_to_zero_at_the_runs_end_by_steps_or_wall_time():
     timed = tiny_cfg(100, "train.lr_schedule=cosine", "train.warmup=10", "train.time_budget_s=60")
     assert lr_at(timed, 20, wall_s=30.0) == pytest.approx(cfg.train.lr / 2)  # half the budget gone
     assert lr_at(tiny_cfg(100), 50) == cfg.train.lr  # the paper's: constant after warm-up
+
+
+def test_wsd_lr_is_constant_then_falls_linearly_to_zero_over_the_last_decay_steps():
+    cfg = tiny_cfg(100, "train.lr_schedule=wsd", "train.decay_steps=40", "train.warmup=10")
+    assert lr_at(cfg, 4) == pytest.approx(cfg.train.lr * 0.5)  # warm-up as in every schedule
+    assert lr_at(cfg, 30) == lr_at(cfg, 60) == pytest.approx(cfg.train.lr)
+    assert lr_at(cfg, 80) == pytest.approx(cfg.train.lr / 2) and lr_at(cfg, 100) == pytest.approx(0, abs=1e-12)
+    tail = tiny_cfg(100, "train.lr_schedule=wsd", "train.warmup=0")  # decay_steps 0: the last 20%
+    assert lr_at(tail, 80) == pytest.approx(cfg.train.lr) and lr_at(tail, 90) == pytest.approx(cfg.train.lr / 2)
+
+
+def test_a_constant_run_resumed_as_wsd_keeps_its_optimiser_and_anneals(tmp_path):
+    words = ("train.ckpt_every=5", "train.val_every=100000")
+    train(tiny_cfg(10, *words), FakeData(), tmp_path, progress=False)
+    out = train(tiny_cfg(20, "train.lr_schedule=wsd", "train.decay_steps=10", *words), FakeData(), tmp_path,
+                progress=False)
+    assert out["resumed_from"] == 10 and out["step"] == 20
+    manifest = json.loads((tmp_path / MANIFEST_FILE).read_text())
+    assert manifest["config"]["train"]["lr_schedule"] == "wsd" and manifest["config"]["train"]["decay_steps"] == 10
 
 
 def test_time_budget_stops_with_a_checkpoint_and_resumes(tmp_path):

@@ -159,12 +159,16 @@ def lr_at(cfg: Config, step: int, wall_s: float = 0.0) -> float:
     constant (paper): 1. cosine: (1 + cos(pi p)) / 2 with p the fraction of the run done,
     max(step / train.max_steps, wall_s / train.time_budget_s): a time-budgeted run decays to
     0 when its budget ends (then the LR depends on wall time, so such a run is not bitwise
-    reproducible; step-bounded runs are).
+    reproducible; step-bounded runs are). wsd: 1 until the last train.decay_steps steps (0: the
+    last 20%) before train.max_steps, then linear to 0 at max_steps (steps only).
     """
     tc = cfg.train
     lr = tc.lr * (min(1.0, (step + 1) / tc.warmup) if tc.warmup > 0 else 1.0)
     if tc.lr_schedule == "constant":
         return lr
+    if tc.lr_schedule == "wsd":
+        n = tc.decay_steps or max(1, round(0.2 * tc.max_steps))
+        return lr * min(1.0, max(0.0, (tc.max_steps - step) / n))
     done = step / tc.max_steps
     if tc.time_budget_s > 0:
         done = max(done, wall_s / tc.time_budget_s)
