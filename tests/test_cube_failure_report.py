@@ -35,8 +35,18 @@ def test_facts_of_a_failed_row_are_measured_from_its_plan_and_trajectory():
     f = failure_facts(cube_row("m", 2, 0, "dropped", final_x=1.5))
     assert f["reason"] == "dropped" and f["plans"] == 2 and f["statuses"] == {"early_stop": 1, "not_reached": 1}
     assert f["plan_end"] < 1e-6  # the plan reached the goal: the arm's part failed
+    assert f["plan_start"] < 1e-6  # ... from where the cube was
     assert np.isclose(f["final"], 1.5) and np.isclose(f["max_z"], 1.0)
     assert np.isclose(f["closest"], np.hypot(1.0, 0.8))  # step 2: (2, 0, 1) against (3, 0, 0.2)
+
+
+def test_a_plan_that_starts_away_from_the_cubes_is_measured():
+    r = cube_row("m", 1, 0, "time out")
+    plan = np.asarray(r["plan_cubes"]).reshape(-1, 3)
+    plan[:, 1] += 1.5  # the model's plan, shifted 1.5 obs units off the real cube from its first frame
+    r["plan_cubes"] = plan.ravel().tolist()
+    f = failure_facts(r)
+    assert np.isclose(f["plan_start"], 1.5) and np.isclose(f["plan_end"], 1.5)
 
 
 def test_reason_table_counts_each_reason_per_method():
@@ -58,6 +68,7 @@ def test_why_failed_job_reads_a_whole_cube_run(tmp_path):
     assert "fast-mctd-replan/cube-single: 1 of 2 episodes failed" in out.stdout
     assert "mctd-replan/cube-single: 2 of 3 episodes failed" in out.stdout
     assert "task 2 seed 0: dropped; 2 plans (1 early_stop, 1 not_reached), targets 0,0" in out.stdout
+    assert "first plan starts 0.00 from the cubes and ends 0.00 from the goal" in out.stdout
     assert "| mctd-replan | cube-single | 3 | 2 | 1 | 0 | 1 |" in out.stdout
 
 

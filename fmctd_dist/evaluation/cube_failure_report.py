@@ -2,8 +2,9 @@
 
 The reason itself is decided when the episode ends (:func:`cube_failures.why_failed`, stored in the
 row). Here a failed row is read against its goal so a reader can tell the planner's part from the
-arm's: how close the first plan ends to the goal (a plan that ends there was a good plan), how
-close the cubes came during the episode, and how the search of each plan ended.
+arm's: how far the first plan starts from where the cubes are (a plan that starts elsewhere sends
+the arm to an empty spot), how close it ends to the goal (a plan that ends there was a good plan),
+how close the cubes came during the episode, and how the search of each plan ended.
 """
 
 from __future__ import annotations
@@ -33,6 +34,8 @@ def failure_facts(r: dict[str, Any]) -> dict[str, Any]:
     return {"task": r["task"], "seed": r["seed"], "reason": r["why_failed"] or "?",
             "plans": int(r.get("plans", sum(statuses.values()))), "statuses": dict(statuses),
             "targets": str(r.get("targets", "")), "releases": int(r.get("releases", 0)), "steps": int(r["env_steps"]),
+            # worst cube at the first plan's first frame against the cubes when it was made (step 0)
+            "plan_start": float(np.linalg.norm(plan[0] - traj[0], axis=-1).max()),
             "plan_end": float(np.linalg.norm(plan[-1] - goal, axis=-1).max()),  # worst cube at the first plan's end
             "closest": float(np.linalg.norm(traj - goal, axis=-1).max(-1).min()),  # all cubes' worst, at its best step
             "final": float(np.linalg.norm(traj[-1] - goal, axis=-1).max()),
@@ -43,7 +46,8 @@ def failure_line(r: dict[str, Any]) -> str:
     f = failure_facts(r)
     statuses = ", ".join(f"{n} {s}" for s, n in f["statuses"].items())
     return (f"task {f['task']} seed {f['seed']}: {f['reason']}; {f['plans']} plans ({statuses}), targets "
-            f"{f['targets'] or '-'}, {f['releases']} releases, {f['steps']} steps; first plan ends "
+            f"{f['targets'] or '-'}, {f['releases']} releases, {f['steps']} steps; first plan starts "
+            f"{f['plan_start']:.2f} from the cubes and ends "
             f"{f['plan_end']:.2f} from the goal, cubes came within {f['closest']:.2f}, ended {f['final']:.2f} "
             f"away (highest z {f['max_z']:.2f})")
 
