@@ -95,6 +95,22 @@ def test_warp_zeroes_the_plan(dense, warp):
         assert s[0] == ACHIEVED and v[0] > 0
 
 
+def test_start_tolerance_rejects_a_plan_that_starts_away_from_the_cubes():
+    # sparse plan: the cube's first frame is 1.5 from where it is (under the 2.0 warp threshold)
+    start, goal = state([0, 0, Z], [2, 0, Z]), state([0, 3, Z], [2, 0, Z])
+    off = plan(*[[[0, y, Z], [2, 0, Z]] for y in (1.5, 2.0, 2.5, 3.0)])
+    on = plan(*[[[0, y, Z], [2, 0, Z]] for y in (0.3, 1.2, 2.1, 3.0)])
+    authors = CubeValue(warp_threshold=2.0, replanning=False)
+    v, s, _, _ = score(authors, off, start, goal)
+    assert s[0] == ACHIEVED and v[0] > 0  # the authors' rules keep it
+    ours = CubeValue(warp_threshold=2.0, replanning=False, start_tol=0.5)
+    v, s, _, _ = score(ours, off, start, goal)
+    assert s[0] == WARP and v[0] == 0.0
+    # only the first step is held tighter: a plan that starts at the cube keeps its 0.9 steps after
+    v_on, s_on, t_on, _ = score(ours, on, start, goal)
+    assert s_on[0] == ACHIEVED and t_on[0] == 3 and v_on[0] == pytest.approx(score(authors, on, start, goal)[0][0])
+
+
 def test_mid_air_placement_does_not_count():
     # cube 1's goal is on top of cube 0's goal spot; cube 0 is still elsewhere (pinned)
     start, goal = state([3, 3, Z], [2, 0, Z]), state([0, 0, Z], [0, 0, Z + 0.4])

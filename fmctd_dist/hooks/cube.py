@@ -50,7 +50,8 @@ def plan_rules(cfg: Config) -> CubeRules:
         raise ConfigError(f"env.object_scales is empty for {cfg.env.name}: give the per-cube guidance scales, "
                           "e.g. env.object_scales=[1,2,4] (configs/env/cube-*.yaml set them)")
     n = cfg.frame_dim // 3
-    value = CubeValue(warp_threshold=warp_threshold(cfg), replanning=cfg.method.replan_every > 0)
+    value = CubeValue(warp_threshold=warp_threshold(cfg), replanning=cfg.method.replan_every > 0,
+                      start_tol=float(cfg.env.start_tolerance))
     return CubeRules(n, tuple(float(s) for s in cfg.env.object_scales), float(cfg.method.guidance_scale), value)
 
 

@@ -9,6 +9,9 @@ The rules, in the order they apply:
   the pinned one (what the controller follows).
 - **warp**: value 0 if any step moves any cube more than ``warp_threshold`` (1.0 dense, 2.0
   sparse) before the frame that ends the plan (as the maze: a warp after the goal is harmless).
+  The first step is from the observed cubes to the plan's first frame; ``start_tol`` > 0 (ours,
+  off by default) holds that step to a tighter bound, because a plan that starts away from the
+  cubes sends the arm to an empty spot (docs/results.md 12.8).
 - **placed** at frame t: within ``goal_tol`` (0.15) of its goal AND supported (table under it,
   |z - 0.2| < ``support_tol``, or another cube one level below, |dz - 0.4| < ``support_tol`` and
   xy within ``stack_xy``: not mid-air) AND its goal not occupied by another cube (another
@@ -54,6 +57,7 @@ class CubeValue:
     support_tol: float = 0.15  # |z - support height| still resting (table or one level up)
     stack_xy: float = 0.3  # xy offset of a cube still resting on the one below (width 0.4)
     occupied_tol: float = 0.3  # another cube's centre this close to a goal occupies it (< one level)
+    start_tol: float = 0.0  # > 0: the first frame's step from the observed cubes is a warp above this (ours)
 
     # ------------------------------------------------------------ the rules on single states
 
@@ -102,7 +106,10 @@ class CubeValue:
         if h == 0:
             return np.zeros(b), np.full(b, NOT_REACHED, np.int8), np.full(b, -1, np.int64)
         prev = np.concatenate([np.broadcast_to(s, (b, 1, n, 3)), p[:, :-1]], axis=1)
-        warp = (np.linalg.norm(p - prev, axis=-1) > self.warp_threshold).any(-1)  # [B, H]
+        limit = np.full(h, self.warp_threshold)
+        if self.start_tol > 0:
+            limit[0] = min(self.warp_threshold, self.start_tol)
+        warp = (np.linalg.norm(p - prev, axis=-1) > limit[None, :, None]).any(-1)  # [B, H]
         placed = self.placed(p, s, g)  # [B, H, N]
         done = placed.all(-1)  # [B, H]
         ends = (placed & ~self.placed(s, s, g)).any(-1) if self.replanning else done  # [B, H]
