@@ -8,7 +8,8 @@ Reads the run ``main`` (the maze tables: every method x PointMaze / AntMaze maze
 ``jobs/eval.py ... eval.run=ablate-k/10`` etc.; the commands are in docs/results.md), and
 rewrites only the blocks between ``<!-- report:NAME -->`` markers. Runs cited by hand-written
 sections (cubes, visual maze, recipe and option benches: ``ARCHIVED``) are not tabulated here but
-their rows are archived with the rest. Also writes
+their rows are archived with the rest; the one exception is the robot table (block ``robot``):
+every archived cube episode whose config hash is today's default for its method and env. Also writes
 ``docs/eval_rows.parquet``: every row without its plan/trajectory arrays, so each number in the
 tables can be traced to its episodes from git alone. That file is also read back: the tables are
 its rows with each episode that ``results/`` also holds replaced by the fresh row, so a fresh
@@ -23,11 +24,12 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from fmctd_dist.cli import run
-from fmctd_dist.config import REPO_ROOT, resolve_path
+from fmctd_dist.config import REPO_ROOT, load_config, resolve_path
 from fmctd_dist.envs import maze_geometry
+from fmctd_dist.evaluation.identity import config_hash
 from fmctd_dist.evaluation.plots import plot_ablation, plot_episode, plot_success_vs_time
-from fmctd_dist.evaluation.report import ABLATIONS, ANT_ENV_ORDER, ENV_ORDER, ablation_summary, ablation_table, fill_markers, \
-    load_rows, maze_table, merge_rows, row_key
+from fmctd_dist.evaluation.report import ABLATIONS, ANT_ENV_ORDER, CUBE_ENV_ORDER, CUBE_METHOD_ORDER, ENV_ORDER, \
+    ablation_summary, ablation_table, current_rows, fill_markers, load_rows, maze_table, merge_rows, row_key
 from fmctd_dist.evaluation.results import summarise
 from fmctd_dist.errors import ConfigError
 
@@ -89,6 +91,13 @@ def main(argv: list[str]) -> int:
     # kept in eval_rows.parquet too, so every number in docs/results.md traces to its episodes from git alone
     archived = {row_key(r): r for r in committed + fresh if r["run"].startswith(ARCHIVED)}
     all_rows += [archived[k] for k in sorted(archived)]
+
+    # the robot table: every archived cube episode made with today's default config of its method and env
+    hashes = {(m, e): config_hash(load_config([f"env={e}", f"method={m}"]))
+              for e in CUBE_ENV_ORDER for m in CUBE_METHOD_ORDER}
+    robot = current_rows([archived[k] for k in sorted(archived)], hashes)
+    if robot:
+        sections["robot"] = maze_table(robot, CUBE_ENV_ORDER, CUBE_METHOD_ORDER)
 
     text = fill_markers(doc.read_text(), sections)
     doc.write_text(text)

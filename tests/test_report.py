@@ -2,8 +2,8 @@
 
 import pytest
 
-from fmctd_dist.evaluation.report import ABLATIONS, ANT_ENV_ORDER, ablation_summary, ablation_table, fill_markers, load_rows, \
-    maze_table, merge_rows
+from fmctd_dist.evaluation.report import ABLATIONS, ANT_ENV_ORDER, CUBE_ENV_ORDER, CUBE_METHOD_ORDER, ablation_summary, \
+    ablation_table, current_rows, fill_markers, load_rows, maze_table, merge_rows
 from fmctd_dist.evaluation.results import ResultStore
 
 
@@ -114,6 +114,24 @@ def test_paper_cells_cover_the_robot_table():
     assert paper_cell("mctd-replan", "cube-triple") == "40 ± 21 / 102.0 ± 6.9 s"
     assert paper_cell("fast-mctd", "pointmaze-giant") == "100 ± 0 / 2.4 ± 0.1 s"
     assert paper_cell("fast-mctd", "cube-single") == "–"  # the paper ran only replanning searches on cubes
+
+
+def test_robot_table_takes_each_episode_of_todays_default_config_once():
+    def cube(run, task, seed, chash, t=1.0, method="fast-mctd-replan", env="cube-double"):
+        return {**row(task, seed, True, t=t, method=method, env=env), "run": run, "config_hash": chash,
+                "checkpoint_digest": "c" * 16, "episode_time_limit": 0.0}
+
+    hashes = {("fast-mctd-replan", "cube-double"): "now"}
+    rows = ([cube("grid-s9", k, s, "now", t=9.0) for k in (1, 2) for s in (0, 1)]  # an early look: seeds 0-1
+            + [cube("grid-s12", k, s, "now", t=2.0) for k in (1, 2) for s in range(4)]  # the grid: seeds 0-3
+            + [cube("ablate", 1, 0, "other")]  # another config: not today's default
+            + [cube("grid-s12", 1, 0, "now", method="s-mctd-replan")])  # no default hash known for it
+    cur = current_rows(rows, hashes)
+    assert len(cur) == 8 and {r["run"] for r in cur} == {"grid-s12"}  # duplicates from the larger run
+    table = maze_table(cur, CUBE_ENV_ORDER, CUBE_METHOD_ORDER)
+    assert "| fast-mctd-replan | cube-double | 8 (2 x 4) | 100 ± 0 | 2.00 ± 0.00 |" in table
+    assert "77 ± 11 / 5.9 ± 1.7 s" in table  # the paper's cell beside ours
+    assert "| mctd-replan | cube-triple | not run |" in table and "| mctd | " not in table
 
 
 def test_report_archives_rows_of_hand_written_sections_without_their_trajectories(tmp_path):
