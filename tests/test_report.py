@@ -125,11 +125,14 @@ def test_robot_table_takes_each_episode_of_todays_default_config_once():
     rows = ([cube("grid-s9", k, s, "now", t=9.0) for k in (1, 2) for s in (0, 1)]  # an early look: seeds 0-1
             + [cube("grid-s12", k, s, "now", t=2.0) for k in (1, 2) for s in range(4)]  # the grid: seeds 0-3
             + [cube("ablate", 1, 0, "other")]  # another config: not today's default
-            + [cube("grid-s12", 1, 0, "now", method="s-mctd-replan")])  # no default hash known for it
+            + [cube("grid-s12", 1, 0, "now", method="s-mctd-replan")]  # no default hash known for it
+            + [cube("grid-s12", 1, s, "now") for s in (4, 5)])  # seeds 4-5 stopped after task 1
     cur = current_rows(rows, hashes)
     assert len(cur) == 8 and {r["run"] for r in cur} == {"grid-s12"}  # duplicates from the larger run
+    assert {r["seed"] for r in cur} == {0, 1, 2, 3}  # a seed counts only with every task
     table = maze_table(cur, CUBE_ENV_ORDER, CUBE_METHOD_ORDER)
-    assert "| fast-mctd-replan | cube-double | 8 (2 x 4) | 100 ± 0 | 2.00 ± 0.00 |" in table
+    assert ("| fast-mctd-replan | cube-double | 8 (2 x 4; 2 more of unfinished seeds not counted) | 100 ± 0 | "
+            "2.00 ± 0.00 |") in table
     assert "77 ± 11 / 5.9 ± 1.7 s" in table  # the paper's cell beside ours
     assert "| mctd-replan | cube-triple | not run |" in table and "| mctd | " not in table
 

@@ -105,6 +105,9 @@ def current_rows(rows: list[dict[str, Any]], hashes: dict[tuple[str, str], str])
     the robot table is not one run's: it is every episode whose config hash is the default's. An
     episode held by several runs (the same bits, by determinism) is taken from the run holding the
     most episodes of its group, so one table line's planning times come from as few runs as possible.
+    A seed counts only with every task of its group (a grid stopped part-way, tasks 1-2 of seeds 2-9,
+    would otherwise weigh those tasks more in the per-seed means); ``dropped_partial`` says how many
+    episodes that left out.
     """
     mine = [r for r in rows if r.get("config_hash") and hashes.get((r["method"], r["env"])) == r["config_hash"]]
     size: dict[tuple, int] = {}
@@ -117,7 +120,16 @@ def current_rows(rows: list[dict[str, Any]], hashes: dict[tuple[str, str], str])
         rank = (size[(r["method"], r["env"], row_identity(r), r["run"])], r["run"])
         if key not in best or rank > best[key][0]:
             best[key] = (rank, r)
-    return [best[k][1] for k in sorted(best, key=str)]
+    groups: dict[tuple, list[dict[str, Any]]] = {}
+    for k in sorted(best, key=str):
+        groups.setdefault(k[:3], []).append(best[k][1])
+    out = []
+    for rs in groups.values():
+        tasks = {int(r["task"]) for r in rs}
+        full = {s for s in {int(r["seed"]) for r in rs} if {int(r["task"]) for r in rs if int(r["seed"]) == s} == tasks}
+        kept = [r for r in rs if int(r["seed"]) in full]
+        out += [{**r, "dropped_partial": len(rs) - len(kept)} for r in kept]
+    return out
 
 
 def maze_table(rows: list[dict[str, Any]], envs: list[str] = ENV_ORDER, methods: list[str] = METHOD_ORDER) -> str:
@@ -138,8 +150,11 @@ def maze_table(rows: list[dict[str, Any]], envs: list[str] = ENV_ORDER, methods:
             for s in key.get((m, env), []):  # one line per config/checkpoint: never averaged together
                 n_tasks = len(s["per_task"])
                 timed_out = f" ({s['timed_out']} timed out)" if s["timed_out"] else ""
+                partial = max((int(r.get("dropped_partial", 0)) for r in rows if (r["method"], r["env"]) == (m, env)
+                               and row_identity(r) == s["identity"]), default=0)
+                more = f"; {partial} more of unfinished seeds not counted" if partial else ""
                 lines.append(
-                    f"| {label(s)} | {env} | {s['episodes']} ({n_tasks} x {s['seeds']}) | "
+                    f"| {label(s)} | {env} | {s['episodes']} ({n_tasks} x {s['seeds']}{more}) | "
                     f"{_pm(s['success'], s['success_std'])}{timed_out} | {_pm(s['plan_time_s'], s['plan_time_std'], '.2f')} | "
                     f"{_shares(s)} | {'/'.join(f'{v:.0f}' for v in s['per_task'].values())} | "
                     f"{paper_cell(m, env)} |")
