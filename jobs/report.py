@@ -90,14 +90,15 @@ def main(argv: list[str]) -> int:
     # runs cited by sections that are not regenerated from rows (cubes, visual maze, benches): their rows are
     # kept in eval_rows.parquet too, so every number in docs/results.md traces to its episodes from git alone
     archived = {row_key(r): r for r in committed + fresh if r["run"].startswith(ARCHIVED)}
-    all_rows += [archived[k] for k in sorted(archived)]
+    archived_rows = [archived[k] for k in sorted(archived)]
+    all_rows += archived_rows
 
     # the robot table: every archived cube episode made with today's default config of its method and env
     hashes = {(m, e): config_hash(load_config([f"env={e}", f"method={m}"]))
               for e in CUBE_ENV_ORDER for m in CUBE_METHOD_ORDER}
-    robot = current_rows([archived[k] for k in sorted(archived)], hashes)
+    robot, dropped = current_rows(archived_rows, hashes)
     if robot:
-        sections["robot"] = maze_table(robot, CUBE_ENV_ORDER, CUBE_METHOD_ORDER)
+        sections["robot"] = maze_table(robot, CUBE_ENV_ORDER, CUBE_METHOD_ORDER, dropped)
 
     text = fill_markers(doc.read_text(), sections)
     doc.write_text(text)

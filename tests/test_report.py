@@ -127,10 +127,10 @@ def test_robot_table_takes_each_episode_of_todays_default_config_once():
             + [cube("ablate", 1, 0, "other")]  # another config: not today's default
             + [cube("grid-s12", 1, 0, "now", method="s-mctd-replan")]  # no default hash known for it
             + [cube("grid-s12", 1, s, "now") for s in (4, 5)])  # seeds 4-5 stopped after task 1
-    cur = current_rows(rows, hashes)
+    cur, dropped = current_rows(rows, hashes)
     assert len(cur) == 8 and {r["run"] for r in cur} == {"grid-s12"}  # duplicates from the larger run
     assert {r["seed"] for r in cur} == {0, 1, 2, 3}  # a seed counts only with every task
-    table = maze_table(cur, CUBE_ENV_ORDER, CUBE_METHOD_ORDER)
+    table = maze_table(cur, CUBE_ENV_ORDER, CUBE_METHOD_ORDER, dropped)
     assert ("| fast-mctd-replan | cube-double | 8 (2 x 4; 2 more of unfinished seeds not counted) | 100 ± 0 | "
             "2.00 ± 0.00 |") in table
     assert "77 ± 11 / 5.9 ± 1.7 s" in table  # the paper's cell beside ours

@@ -11,6 +11,7 @@ prose around them stays hand-written and the numbers stay generated.
 from __future__ import annotations
 
 import re
+from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -97,44 +98,44 @@ def _shares(s: dict[str, Any]) -> str:
     return f"{100 * s['denoise_share']:.1f}% / {calls}"
 
 
-def current_rows(rows: list[dict[str, Any]], hashes: dict[tuple[str, str], str]) -> list[dict[str, Any]]:
+def current_rows(rows: list[dict[str, Any]],
+                 hashes: dict[tuple[str, str], str]) -> tuple[list[dict[str, Any]], dict[tuple, int]]:
     """The rows made with today's default config of their (method, env) (``hashes``: its config hash),
-    one per episode and checkpoint.
+    one per episode and checkpoint, and per (method, env, identity) how many episodes were left out
+    because their seed lacks a task.
 
     Cube rows come from many runs (a grid at seeds 0-1, then the rest; an ablation beside them), so
     the robot table is not one run's: it is every episode whose config hash is the default's. An
     episode held by several runs (the same bits, by determinism) is taken from the run holding the
     most episodes of its group, so one table line's planning times come from as few runs as possible.
     A seed counts only with every task of its group (a grid stopped part-way, tasks 1-2 of seeds 2-9,
-    would otherwise weigh those tasks more in the per-seed means); ``dropped_partial`` says how many
-    episodes that left out.
+    would otherwise weigh those tasks more in the per-seed means).
     """
-    mine = [r for r in rows if r.get("config_hash") and hashes.get((r["method"], r["env"])) == r["config_hash"]]
-    size: dict[tuple, int] = {}
-    for r in mine:
-        size[(r["method"], r["env"], row_identity(r), r["run"])] = size.get(
-            (r["method"], r["env"], row_identity(r), r["run"]), 0) + 1
-    best: dict[tuple, dict[str, Any]] = {}
-    for r in mine:
-        key = (r["method"], r["env"], row_identity(r), int(r["task"]), int(r["seed"]))
-        rank = (size[(r["method"], r["env"], row_identity(r), r["run"])], r["run"])
+    mine = [(r, (r["method"], r["env"], row_identity(r))) for r in rows
+            if r.get("config_hash") and hashes.get((r["method"], r["env"])) == r["config_hash"]]
+    runs = Counter((group, r["run"]) for r, group in mine)  # episodes per (group, run)
+    best: dict[tuple, tuple[tuple[int, str], dict[str, Any]]] = {}
+    for r, group in mine:
+        key, rank = (group, int(r["task"]), int(r["seed"])), (runs[(group, r["run"])], r["run"])
         if key not in best or rank > best[key][0]:
             best[key] = (rank, r)
     groups: dict[tuple, list[dict[str, Any]]] = {}
-    for k in sorted(best, key=str):
-        groups.setdefault(k[:3], []).append(best[k][1])
-    out = []
-    for rs in groups.values():
+    for key in sorted(best, key=str):
+        groups.setdefault(key[0], []).append(best[key][1])
+    out, dropped = [], {}
+    for group, rs in groups.items():
         tasks = {int(r["task"]) for r in rs}
         full = {s for s in {int(r["seed"]) for r in rs} if {int(r["task"]) for r in rs if int(r["seed"]) == s} == tasks}
-        kept = [r for r in rs if int(r["seed"]) in full]
-        out += [{**r, "dropped_partial": len(rs) - len(kept)} for r in kept]
-    return out
+        out += [r for r in rs if int(r["seed"]) in full]
+        dropped[group] = sum(int(r["seed"]) not in full for r in rs)
+    return out, dropped
 
 
-def maze_table(rows: list[dict[str, Any]], envs: list[str] = ENV_ORDER, methods: list[str] = METHOD_ORDER) -> str:
+def maze_table(rows: list[dict[str, Any]], envs: list[str] = ENV_ORDER, methods: list[str] = METHOD_ORDER,
+               dropped: dict[tuple, int] | None = None) -> str:
     """The paper's Table "Maze results" for ``envs``: one line per (method, env) in the paper's order
-    (``methods``; the robot table passes the cube envs and the replanning methods)."""
+    (``methods``; the robot table passes the cube envs and the replanning methods, and ``dropped``
+    from :func:`current_rows`, said in the episodes cell)."""
     summary = summarise(rows)
     key: dict[tuple[str, str], list[dict[str, Any]]] = {}
     for s in summary:
@@ -150,8 +151,7 @@ def maze_table(rows: list[dict[str, Any]], envs: list[str] = ENV_ORDER, methods:
             for s in key.get((m, env), []):  # one line per config/checkpoint: never averaged together
                 n_tasks = len(s["per_task"])
                 timed_out = f" ({s['timed_out']} timed out)" if s["timed_out"] else ""
-                partial = max((int(r.get("dropped_partial", 0)) for r in rows if (r["method"], r["env"]) == (m, env)
-                               and row_identity(r) == s["identity"]), default=0)
+                partial = (dropped or {}).get((m, env, s["identity"]), 0)
                 more = f"; {partial} more of unfinished seeds not counted" if partial else ""
                 lines.append(
                     f"| {label(s)} | {env} | {s['episodes']} ({n_tasks} x {s['seeds']}{more}) | "
