@@ -167,10 +167,31 @@ def main() -> None:
             killed.update(node=nid[:8], actors=counts[nid], rows_before=n_rows("node"))
             cluster.remove_node(by_node[nid])
 
-        t = threading.Thread(target=remove_busiest_worker, daemon=True)
+        def remove_then_release():
+            try:
+                remove_busiest_worker()
+            finally:
+                removed.set()  # a watcher that gave up must not hold the writer
+
+        # The runner writes rows in this process: hold it in its first write until the node is gone, so the fault
+        # lands with one row written whatever the episodes' speed (on a fast machine two more rows were written
+        # while the watcher was still looking up where the actors live). The actors keep running meanwhile.
+        removed = threading.Event()
+        write = ResultStore.write
+
+        def gated_write(self, row):
+            path = write(self, row)
+            removed.wait(timeout=120)
+            return path
+
+        ResultStore.write = gated_write
+        t = threading.Thread(target=remove_then_release, daemon=True)
         t.start()
         say("node: evaluate")
-        report["node_s"] = round(evaluate("node"), 1)
+        try:
+            report["node_s"] = round(evaluate("node"), 1)
+        finally:
+            ResultStore.write = write
         say("node: done")
         t.join(timeout=5)
         report["node"], report["node_killed"] = rows_of("node"), killed
