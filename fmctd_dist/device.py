@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import sys
 from collections.abc import Iterator
 
 import torch
@@ -62,3 +63,43 @@ def torch_threads(n: int) -> Iterator[None]:
         yield
     finally:
         torch.set_num_threads(before)
+
+
+# CPU flags under which oneDNN runs bf16 matmuls in hardware; without them torch.autocast(bfloat16)
+# still works but emulates them (AMD Zen 3 EPYC: 12.5x slower per training step than fp32, results 6.3)
+NATIVE_BF16_FLAGS = ("avx512_bf16", "amx_bf16")
+
+
+def cpu_flags(cpuinfo: str | None = None) -> set[str] | None:
+    """The CPU's feature flags from /proc/cpuinfo (or the given text); None where there is none to read."""
+    if cpuinfo is None:
+        try:
+            cpuinfo = open("/proc/cpuinfo").read()
+        except OSError:
+            return None
+    for line in cpuinfo.splitlines():
+        if line.startswith("flags"):
+            return set(line.split(":", 1)[1].split())
+    return None
+
+
+def bf16_warning(device: torch.device, field: str, cpuinfo: str | None = None) -> str | None:
+    """A one-line warning when ``field``=bf16 would run emulated on this CPU, else None.
+
+    Not an error: the bits are as valid as on a CPU with native bf16, only far slower, and a
+    machine whose flags cannot be read is given the benefit of the doubt.
+    """
+    if device.type != "cpu":
+        return None
+    flags = cpu_flags(cpuinfo)
+    if flags is None or flags & set(NATIVE_BF16_FLAGS):
+        return None
+    return (f"warning: {field}=bf16 on a CPU without {' or '.join(NATIVE_BF16_FLAGS)}: torch emulates bf16 here "
+            f"(measured 12.5x slower per training step than fp32 on an AMD Zen 3 EPYC); set {field}=fp32")
+
+
+def warn_bf16(device: torch.device, field: str) -> None:
+    """Print :func:`bf16_warning` to stderr if it applies."""
+    msg = bf16_warning(device, field)
+    if msg:
+        print(msg, file=sys.stderr, flush=True)

@@ -170,3 +170,22 @@ def test_compile_without_a_cxx_compiler_is_one_clear_error_before_anything_start
 
     check_compile(False, "cpu")  # off: nothing needed
     check_compile(True, "cuda")  # a GPU's kernels are triton's, not g++'s
+
+
+def test_bf16_warning_only_where_the_cpu_emulates_it(capsys):
+    """bf16 on a CPU without avx512_bf16 / amx_bf16 runs ~12x slower than fp32: one warning line naming the fix."""
+    from fmctd_dist.device import bf16_warning, cpu_flags
+
+    zen3 = "processor\t: 0\nflags\t\t: fpu sse2 avx avx2 fma\n"
+    sapphire = "processor\t: 0\nflags\t\t: fpu avx2 avx512f avx512_bf16 amx_bf16\n"
+    cpu = torch.device("cpu")
+    assert cpu_flags(zen3) == {"fpu", "sse2", "avx", "avx2", "fma"}
+    msg = bf16_warning(cpu, "train.precision", zen3)
+    assert msg.startswith("warning: train.precision=bf16") and "train.precision=fp32" in msg
+    assert bf16_warning(cpu, "train.precision", sapphire) is None
+    assert bf16_warning(cpu, "train.precision", "no flags line") is None  # unknown: no warning
+    assert bf16_warning(torch.device("meta"), "diffusion.precision", zen3) is None  # only CPUs
+    # the inference path says it too, where this machine emulates bf16
+    runtime_model(tiny_model(), "bf16")
+    emulated = bf16_warning(cpu, "diffusion.precision") is not None
+    assert ("diffusion.precision=bf16" in capsys.readouterr().err) == emulated

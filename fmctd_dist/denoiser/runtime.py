@@ -32,6 +32,7 @@ import types
 import torch
 from torch import nn
 
+from fmctd_dist.device import warn_bf16
 from fmctd_dist.diffusion.sampler import functional_guided_estimate
 from fmctd_dist.errors import ConfigError
 
@@ -138,6 +139,8 @@ def runtime_model(model: nn.Module, precision: str = "fp32", compile: bool = Fal
     """
     if precision == "fp32" and not compile:
         return model
+    if precision == "bf16":
+        warn_bf16(next(model.parameters()).device, "diffusion.precision")
     wrapped = RuntimeModel(model, precision)
     if compile:
         wrapped.guided_estimate = CompiledStep(wrapped)

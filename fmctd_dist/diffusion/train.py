@@ -25,7 +25,7 @@ from tqdm import tqdm
 
 from fmctd_dist.config import Config, git_sha, resolve_path
 from fmctd_dist.data.tokens import Normaliser
-from fmctd_dist.device import resolve_device, set_threads
+from fmctd_dist.device import resolve_device, set_threads, warn_bf16
 from fmctd_dist.diffusion.checkpoint import (
     check_compatible, load_checkpoint, load_init_weights, load_train_state, module_state, save_checkpoint,
     save_train_state,
@@ -201,6 +201,8 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
     """Train (or resume) the cfg.model.kind model into out_dir; returns the summary written to the manifest."""
     device = resolve_device(cfg.device)
     set_threads(cfg.train.threads)
+    if cfg.train.precision == "bf16":
+        warn_bf16(device, "train.precision")
     out_dir = Path(out_dir)
     tc = cfg.train
 
