@@ -66,7 +66,7 @@ def torch_threads(n: int) -> Iterator[None]:
 
 
 # CPU flags under which oneDNN runs bf16 matmuls in hardware; without them torch.autocast(bfloat16)
-# still works but emulates them (AMD Zen 3 EPYC: 12.5x slower per training step than fp32, results 6.3)
+# still works but emulates them (AMD Zen 3 EPYC: 11-12.5x slower per training step than fp32, results 6.3)
 NATIVE_BF16_FLAGS = ("avx512_bf16", "amx_bf16")
 
 
@@ -95,7 +95,7 @@ def bf16_warning(device: torch.device, field: str, cpuinfo: str | None = None) -
     if flags is None or flags & set(NATIVE_BF16_FLAGS):
         return None
     return (f"warning: {field}=bf16 on a CPU without {' or '.join(NATIVE_BF16_FLAGS)}: torch emulates bf16 here "
-            f"(measured 12.5x slower per training step than fp32 on an AMD Zen 3 EPYC); set {field}=fp32")
+            f"(measured 11-12.5x slower per training step than fp32 on an AMD Zen 3 EPYC; jobs/bench_train_step.py); set {field}=fp32")
 
 
 def warn_bf16(device: torch.device, field: str) -> None:
