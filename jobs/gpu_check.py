@@ -35,7 +35,7 @@ FULL = {"throughput": ["--throughput", "device=cuda", "batches=1,25,200,1000", "
                      "options=fp32,compiled,bf16+compiled", "rounds=3"],
         "plans": ["methods=[mctd,fast-mctd]", "env=pointmaze-giant", "device=cuda", "tasks=[1]", "seeds=[0]",
                   "eval.episode_time_limit=120", "ray.micro_batch=200"]}
-DRY = {"throughput": ["--throughput", "device=cpu", "batches=1,4", "tokens=11", "options=fp32,bf16", "rounds=1"],
+DRY = {"throughput": ["--throughput", "device=cpu", "batches=2,4", "tokens=3", "options=fp32,bf16", "rounds=1"],
        "compiled": ["--throughput", "device=cpu", "batches=2", "tokens=3", "options=fp32,compiled", "rounds=1"],
        "plans": ["methods=[mctd,fast-mctd]", "env=pointmaze-medium", "device=cpu", "tasks=[1]", "seeds=[0]",
                  "method.budget=4", "eval.threads=1", "eval.episode_time_limit=60"]}
@@ -63,6 +63,8 @@ def main(argv: list[str]) -> int:
     args = ap.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
     env = install({**os.environ, "PYTHONUNBUFFERED": "1"})
+    if args.dry_run:  # one torch thread: on a loaded CPU spinning OpenMP threads made a tiny bf16 cell run minutes
+        env["OMP_NUM_THREADS"] = "1"
     if not args.dry_run:
         smi = subprocess.run(["nvidia-smi", "-L"], capture_output=True, text=True)
         log(f"GPU: {smi.stdout.strip() or smi.stderr.strip()}")
