@@ -106,8 +106,10 @@ def current_rows(rows: list[dict[str, Any]],
 
     Cube rows come from many runs (a grid at seeds 0-1, then the rest; an ablation beside them), so
     the robot table is not one run's: it is every episode whose config hash is the default's. An
-    episode held by several runs (the same bits, by determinism) is taken from the run holding the
-    most episodes of its group, so one table line's planning times come from as few runs as possible.
+    episode held by several runs is taken from the run holding the most episodes of its group, so one
+    table line's planning times come from as few runs as possible. (The runs hold the same bits on one
+    machine; a long cube episode re-run on another CPU can differ, as MuJoCo's floating point does:
+    docs/results.md 12.8.2. The rule keeps the choice fixed either way.)
     A seed counts only with every task of its group (a grid stopped part-way, tasks 1-2 of seeds 2-9,
     would otherwise weigh those tasks more in the per-seed means).
     """
