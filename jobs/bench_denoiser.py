@@ -140,7 +140,8 @@ def throughput(batches=(1, 25, 200), tokens=(11, 21, 51, 101), options=("fp32", 
 
     consts = make_consts(DiffusionConfig(), device)
     dtypes = {"fp32": torch.float32, "bf16": torch.bfloat16}
-    measured = {d: peak_flops(dtypes[d], device, clock=clock) for d in dtypes if d in {OPTIONS[o][0] for o in options}}
+    used = {OPTIONS[o][0] for o in options}
+    measured = {d: peak_flops(dtypes[d], device, clock=clock) for d in dtypes if d in used}
     peaks = {d: f for d, (f, _) in measured.items()}
     peak_text = ", ".join(f"{d} {f / 1e9:,.0f} GFLOP/s at {n}^3" for d, (f, n) in measured.items())
     lines = [f"peak (square matmul): {peak_text}; "

@@ -65,7 +65,7 @@ def main(argv: list[str]) -> int:
     env = install({**os.environ, "PYTHONUNBUFFERED": "1"})
     if args.dry_run:  # one torch thread: on a loaded CPU spinning OpenMP threads made a tiny bf16 cell run minutes
         env["OMP_NUM_THREADS"] = "1"
-    if not args.dry_run:
+    else:
         smi = subprocess.run(["nvidia-smi", "-L"], capture_output=True, text=True)
         log(f"GPU: {smi.stdout.strip() or smi.stderr.strip()}")
     words = DRY if args.dry_run else FULL

@@ -2,13 +2,26 @@
 
 from __future__ import annotations
 
+import importlib.util
 import os
+from pathlib import Path
+from types import ModuleType
 
 import pytest
 
 from fmctd_dist.device import torch_threads  # noqa: F401 - re-exported: tests do `from conftest import torch_threads`
 
 os.environ.setdefault("MUJOCO_GL", "egl")
+
+JOBS = Path(__file__).resolve().parent.parent / "jobs"
+
+
+def load_job(name: str) -> ModuleType:
+    """A script under jobs/ (not a package) imported as a module, so tests call its functions."""
+    spec = importlib.util.spec_from_file_location(name, JOBS / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
 @pytest.fixture(scope="session")

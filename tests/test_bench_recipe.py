@@ -2,23 +2,19 @@
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import os
 import subprocess
 import sys
 from pathlib import Path
 
-from conftest import TINY_DATA, TINY_MODEL
+from conftest import TINY_DATA, TINY_MODEL, load_job
 
 REPO = Path(__file__).resolve().parent.parent
 
 
 def bench_module():
-    spec = importlib.util.spec_from_file_location("bench_recipe", REPO / "jobs" / "bench_recipe.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_job("bench_recipe")
 
 
 def test_tiny_bench_trains_evaluates_and_appends_its_table(tiny_dataset, tmp_path):

@@ -326,9 +326,8 @@ def test_cube_plan_rules_on_hand_made_plans():
 
 def test_quality_curve_job_on_cube_snapshots(tiny_cube, tmp_path, capsys):
     """jobs/quality_curve.py measures each snapshot once (cached by digest) and draws the curve."""
-    import importlib.util
+    from conftest import load_job
 
-    from fmctd_dist.config import REPO_ROOT
     from fmctd_dist.data.registry import load_family_dataset
     from fmctd_dist.data.windows import train_data
     from fmctd_dist.diffusion.train import train
@@ -338,9 +337,7 @@ def test_quality_curve_job_on_cube_snapshots(tiny_cube, tmp_path, capsys):
                    "train.max_steps=4", "train.batch_size=4", "train.val_batches=1", "train.warmup=1", "jump=5",
                    "train.ckpt_every=2", "train.snapshot_every_s=1e-9")
     train(cfg, train_data(cfg, load_family_dataset(cfg)), tmp_path / "run", progress=False)
-    spec = importlib.util.spec_from_file_location("quality_curve", REPO_ROOT / "jobs" / "quality_curve.py")
-    job = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(job)
+    job = load_job("quality_curve")
     rows = job.points(tmp_path / "run")
     assert [r["steps"] for _, r in rows] == [2, 4] and all(0 <= r["unguided_no_warp"] <= 1 for _, r in rows)
     assert all((tmp_path / "run" / "snapshots" / name / "quality.json").exists() for name, _ in rows)

@@ -99,12 +99,9 @@ def test_options_are_config_and_recorded_in_rows():
 def test_throughput_bench_cpu_clock_runs_and_refuses_more_threads(monkeypatch):
     """`bench_denoiser --throughput clock=cpu` (work per CPU second on a shared machine) prints its
     table; with more than one torch thread process time is not one core's time, so it is refused."""
-    import importlib.util
-    from pathlib import Path
+    from conftest import load_job
 
-    spec = importlib.util.spec_from_file_location("bench_denoiser", Path(__file__).parents[1] / "jobs/bench_denoiser.py")
-    bench = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench)
+    bench = load_job("bench_denoiser")
     monkeypatch.setattr(bench, "peak_flops", lambda *a, **k: (1e9, 256))  # skip the square matmuls
     lines = bench.throughput(batches=(2,), tokens=(3,), options=("fp32", "bf16"), width=16, layers=1, reps=1,
                              clock="cpu")
@@ -194,12 +191,9 @@ def test_bf16_warning_only_where_the_cpu_emulates_it(capsys):
 def test_peak_matmul_stays_within_its_time_budget():
     """The peak's matmul side stops growing once the next size would pass the budget, so an emulated
     dtype (bf16 without avx512_bf16/amx_bf16) costs seconds instead of minutes (session 13's CI)."""
-    import importlib.util
-    from pathlib import Path
+    from conftest import load_job
 
-    spec = importlib.util.spec_from_file_location("bench_denoiser", Path(__file__).parents[1] / "jobs/bench_denoiser.py")
-    bench = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench)
+    bench = load_job("bench_denoiser")
     flops, n = bench.peak_flops(torch.float32, n_max=2048, reps=1, budget_s=0.0)
     assert n == 256 and flops > 0
     assert bench.peak_flops(torch.float32, n_max=512, reps=1, budget_s=1e9)[1] == 512
