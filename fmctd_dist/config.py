@@ -23,7 +23,7 @@ from omegaconf.errors import OmegaConfBaseException
 
 from fmctd_dist.errors import ConfigError, did_you_mean, unknown_name
 from fmctd_dist.families import ANT_ENVS, CUBE_ENVS, ENV_NAMES, MAZES, POINT_ENVS  # noqa: F401 - re-exported
-from fmctd_dist.families import PENDING_FAMILIES, family, require_family, state_dim
+from fmctd_dist.families import ENV_FIELD_READERS, PENDING_FAMILIES, family, require_family, state_dim
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 CONFIG_DIR = REPO_ROOT / "configs"
@@ -536,9 +536,21 @@ def check_ranges(cfg: Config) -> None:
         rng.check(key, _get(cfg, key))
 
 
+def check_env_fields(env: EnvConfig) -> None:
+    """One ConfigError for an env field set on a family that never reads it (``families.ENV_FIELD_READERS``)."""
+    fam, default = family(env.name), EnvConfig()
+    for key, readers in ENV_FIELD_READERS.items():
+        value = getattr(env, key)
+        if fam not in readers and value != getattr(default, key):
+            raise ConfigError(f"env.{key}={value!r} is read by {' / '.join(readers)} envs only; env.name={env.name} "
+                              f"({fam}) would ignore it. Drop env.{key} (or leave it at "
+                              f"{getattr(default, key)!r}) for this env")
+
+
 def validate(cfg: Config) -> None:
     """Declared ranges, then cross-field checks; raise one ConfigError naming the field and the fix."""
     check_ranges(cfg)
+    check_env_fields(cfg.env)
     if cfg.model.kind == "diffuser" and cfg.method.planner != "diffuser":
         raise ConfigError(
             f"model.kind=diffuser with method.planner={cfg.method.planner}: the U-Net gives all plan tokens one "

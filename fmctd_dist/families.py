@@ -37,6 +37,19 @@ PENDING_FAMILIES: tuple[str, ...] = ()
 HOOKS = {"pointmaze": "fmctd_dist.hooks.maze", "antmaze": "fmctd_dist.hooks.maze", "cube": "fmctd_dist.hooks.cube",
          "visual-pointmaze": "fmctd_dist.hooks.visual"}
 
+# The env fields only some families read (the rest, name / protocol / max_steps / horizon, every family
+# reads). Set away from its default on another family, such a field would be silently unused, so
+# config.validate refuses it: one ConfigError naming the field and who reads it.
+ENV_FIELD_READERS: dict[str, tuple[str, ...]] = {
+    "policy": ("antmaze", "cube"),  # the low-level policy dir
+    "replan_every": ("cube",),  # the maze families replan on method.replan_every
+    "warp_dense": ("cube", "visual-pointmaze"),  # the point / ant mazes use method.warp_threshold
+    "warp_sparse": ("cube", "visual-pointmaze"),
+    "object_scales": ("cube",),
+    "preposition_yaw": ("cube",),
+    "start_tolerance": ("cube",),
+}
+
 
 @dataclass(frozen=True)
 class EnvSpec:

@@ -1,5 +1,7 @@
 """Config loading: groups, overrides, aliases, and one clear ConfigError per bad field."""
 
+import re
+
 import pytest
 
 from fmctd_dist.config import Config, config_from_dict, load_config
@@ -61,3 +63,25 @@ def test_did_you_mean():
         load_config(["env=pointmaze-gaint"])
     with pytest.raises(ConfigError, match="did you mean 'method.parallel'"):
         load_config(["method.parralel=3"])
+
+
+@pytest.mark.parametrize(
+    "args, field",
+    [
+        (["env=pointmaze-medium", "env.start_tolerance=0.5"], "env.start_tolerance=0.5 is read by cube envs only"),
+        (["env=antmaze-large", "env.preposition_yaw=true"], "env.preposition_yaw=True is read by cube envs only"),
+        (["env=pointmaze-giant", "env.policy=checkpoints/cube-single-policy"], "env.policy="),
+        (["env=visual-pointmaze-medium", "env.replan_every=50"], "env.replan_every=50"),
+        (["env=pointmaze-large", "env.warp_sparse=8.0"], "env.warp_sparse=8.0 is read by cube / visual-pointmaze"),
+    ],
+)
+def test_env_field_of_another_family_is_refused(args, field):
+    """A family-specific env field set on an env that never reads it would be silently unused."""
+    with pytest.raises(ConfigError, match=re.escape(field)):
+        load_config(args)
+
+
+def test_env_fields_their_family_reads_load():
+    assert load_config(["env=cube-triple", "env.start_tolerance=0.5"]).env.start_tolerance == 0.5
+    assert load_config(["env=antmaze-medium", "env.policy=x"]).env.policy == "x"
+    assert load_config(["env=visual-pointmaze-large", "env.warp_sparse=8.0"]).env.warp_sparse == 8.0
