@@ -5,6 +5,7 @@
     python jobs/bench_denoiser.py --throughput options=fp32,bf16,compiled,bf16+compiled   # speed per option
     python jobs/bench_denoiser.py --precision checkpoints/pointmaze-medium-h1   # why plans warp
     python jobs/bench_denoiser.py --cube checkpoints/cube-single-h5   # cube models (also picked out of the default list)
+    python jobs/bench_denoiser.py --cube data.episodes=300 A B   # key=value overrides every checkpoint's config (one val split)
 
 Quality, per checkpoint: validation loss (manifest), then 100 unguided and 100 guided plans
 (20 per task start, full pyramid schedule = plain Diffusion Forcing sampling; Diffuser
@@ -27,7 +28,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from fmctd_dist.config import REPO_ROOT
+from fmctd_dist.config import REPO_ROOT, Config, apply_override, config_from_dict, validate
 from fmctd_dist.denoiser.runtime import option_settings
 from fmctd_dist.diffusion.model import DFTransformer
 from fmctd_dist.evaluation.plan_quality import plan_quality, precision
@@ -55,7 +56,23 @@ def precision_lines(ckpt: Path, batch: int = 64, timesteps: tuple[int, ...] = ()
 OPTIONS = {n: option_settings(n) for n in ("fp32", "bf16", "compiled", "bf16+compiled")}
 
 
-def cube_lines(ckpts: list[Path]) -> list[str]:
+def cube_config(ckpt: Path, overrides: list[str]) -> Config | None:
+    """The checkpoint's own config with dotted ``key=value`` overrides (e.g. ``data.episodes=300``, so models
+    trained on different data sizes are measured on one validation split); None when there are none."""
+    if not overrides:
+        return None
+    from omegaconf import OmegaConf
+
+    cfg = OmegaConf.structured(config_from_dict(json.loads((ckpt / "manifest.json").read_text())["config"]))
+    for word in overrides:
+        key, _, value = word.partition("=")
+        cfg = apply_override(cfg, key, value)
+    out: Config = OmegaConf.to_object(cfg)  # type: ignore[assignment]
+    validate(out)
+    return out
+
+
+def cube_lines(ckpts: list[Path], overrides: list[str] = ()) -> list[str]:
     """The cube quality table (fmctd_dist.evaluation.cube_quality) as markdown: model plans, then the data's."""
     from fmctd_dist.evaluation.cube_quality import cube_plan_quality
 
@@ -63,7 +80,7 @@ def cube_lines(ckpts: list[Path]) -> list[str]:
              "at most one cube moved | some cube moved | boundary / inside step | largest step |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for ckpt in ckpts:
-        r = cube_plan_quality(ckpt)
+        r = cube_plan_quality(ckpt, cube_config(ckpt, list(overrides)))
         for who in ("model", "data"):
             q = r[who]
             lines.append(f"| {r['checkpoint']} | {r['steps']} | {r['val_loss']:.4f} | {r['train_h']:.2f} | {r['warp']:.2f} | "
@@ -215,7 +232,8 @@ def main(argv: list[str]) -> None:
             print("\n".join(precision_lines(Path(a))) + "\n")
         return
     if argv and argv[0] == "--cube":
-        print("\n".join(cube_lines([Path(a) for a in argv[1:]])))
+        words = [a for a in argv[1:] if "=" in a]  # key=value overrides for every checkpoint's config
+        print("\n".join(cube_lines([Path(a) for a in argv[1:] if "=" not in a], words)))
         return
     # every shipped planning model (DF or Diffuser); other checkpoints (the ant expert) have no model_kind
     ckpts = [Path(a) for a in argv] or sorted(p.parent for p in (REPO_ROOT / "checkpoints").glob("*/manifest.json")

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import dataclasses
+import json
+
 import numpy as np
 import pytest
 
@@ -343,3 +346,21 @@ def test_quality_curve_job_on_cube_snapshots(tiny_cube, tmp_path, capsys):
     assert all((tmp_path / "run" / "snapshots" / name / "quality.json").exists() for name, _ in rows)
     assert job.main([str(tmp_path / "run"), "--plot", str(tmp_path / "curve.png")]) == 0
     assert "| k" in capsys.readouterr().out and (tmp_path / "curve.png").stat().st_size > 1000
+
+
+def test_bench_denoiser_cube_overrides_apply_to_every_checkpoint():
+    """`bench_denoiser --cube data.episodes=300 A B` measures models trained on different data sizes on one
+    validation split: the words override each checkpoint's own config; a bad word is one ConfigError."""
+    from conftest import load_job
+
+    from fmctd_dist.config import REPO_ROOT, config_from_dict
+
+    bench = load_job("bench_denoiser")
+    ckpt = REPO_ROOT / "checkpoints" / "cube-triple-h5"
+    own = config_from_dict(json.loads((ckpt / "manifest.json").read_text())["config"])
+    assert bench.cube_config(ckpt, []) is None
+    cfg = bench.cube_config(ckpt, ["data.episodes=300"])
+    assert cfg.data.episodes == 300 and own.data.episodes != 300
+    assert dataclasses.replace(cfg, data=own.data) == own  # nothing else changed
+    with pytest.raises(ConfigError, match="data.episodes"):
+        bench.cube_config(ckpt, ["data.episodes=-1"])
