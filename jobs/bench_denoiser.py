@@ -210,6 +210,13 @@ def throughput(batches=(1, 25, 200), tokens=(11, 21, 51, 101), options=("fp32", 
 
 def main(argv: list[str]) -> None:
     torch.manual_seed(0)
+    if argv and argv[0] in ("-h", "--help"):
+        print(__doc__)
+        return
+    missing = [a for a in argv if not a.startswith("--") and "=" not in a and not (Path(a) / "manifest.json").exists()]
+    if missing and argv[0] not in ("--throughput",):
+        raise SystemExit(f"bench_denoiser: no checkpoint (manifest.json) at {', '.join(missing)}; give checkpoint "
+                         "dirs such as checkpoints/pointmaze-medium-h5 (--help for the modes)")
     if argv and argv[0] == "--throughput":
         # --throughput [options=fp32,bf16,compiled,bf16+compiled] [batches=1,25,200] [tokens=11,21,51,101] [device=cpu]
         #   [clock=wall|cpu] [reps=3] [rounds=5]
