@@ -365,3 +365,5 @@ def test_bench_denoiser_cube_overrides_apply_to_every_checkpoint():
     assert dataclasses.replace(cfg, data=own.data) == own  # nothing else changed
     with pytest.raises(ConfigError, match="data.episodes"):
         bench.cube_config(ckpt, ["data.episodes=-1"])
+    with pytest.raises(SystemExit, match="no checkpoint \\(manifest.json\\) at no-such-dir"):
+        bench.main(["--cube", "data.episodes=300", "no-such-dir"])
