@@ -214,7 +214,7 @@ def main(argv: list[str]) -> None:
         print(__doc__)
         return
     missing = [a for a in argv if not a.startswith("--") and "=" not in a and not (Path(a) / "manifest.json").exists()]
-    if missing and argv[0] not in ("--throughput",):
+    if missing:  # every other word is a mode (--cube) or a key=value (--throughput's, --cube's overrides)
         raise SystemExit(f"bench_denoiser: no checkpoint (manifest.json) at {', '.join(missing)}; give checkpoint "
                          "dirs such as checkpoints/pointmaze-medium-h5 (--help for the modes)")
     if argv and argv[0] == "--throughput":
