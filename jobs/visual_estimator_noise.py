@@ -22,6 +22,7 @@ from fmctd_dist.config import Config, load_config
 from fmctd_dist.device import set_threads
 from fmctd_dist.visual.guide import Positions
 from fmctd_dist.visual.mlp import build_mlp
+from fmctd_dist.visual.plan_quality import TaskSearch, estimated_steps, search_task, visual_planner
 
 SIGMAS = (0.0, 0.1, 0.3, 0.6)  # noise std in units of each latent dimension's std over the train latents
 WARP = 2.0  # the maze's sparse warp threshold, on estimated positions
@@ -59,36 +60,12 @@ def train_estimator(a: dict[str, np.ndarray], sigma: float, steps: int = 6000, s
     return Positions(net)
 
 
-def search_plans(cfg: Config) -> tuple[list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]], Positions]:
-    """(every expanded node's plan, start latent, goal latent, true goal) per task; and the shipped estimator."""
-    from fmctd_dist.denoiser.local import LocalDenoiser
-    from fmctd_dist.diffusion.checkpoint import normaliser_from_manifest, read_manifest
-    from fmctd_dist.hooks import hooks_for
-    from fmctd_dist.planners import make_planner
-    from fmctd_dist.planners.base import plan_seed
-
-    manifest = read_manifest(cfg.checkpoint_dir(), cfg)
-    planner = make_planner(cfg, LocalDenoiser.from_checkpoint(cfg.checkpoint_dir(), cfg),
-                           normaliser_from_manifest(manifest))
-    ep = hooks_for(cfg.env.name).episodes(cfg)
-    out = []
-    for task in cfg.eval.tasks:
-        ep.env.reset(task, 0)
-        z, zg = ep.vae.encode(ep.env.image()[None])[0], ep.vae.encode(ep.env.goal_image()[None])[0]
-        planner.plan(z, zg, plan_seed(cfg.seed, task, 0, 0))
-        r = planner.last_result
-        out.append((r.tree.sim_plan[1:r.expansions + 1], z, zg, np.asarray(ep.env.goal)))
-    return out, ep.positions
-
-
-def row(name: str, pos: Positions, a: dict[str, np.ndarray], searches: list) -> str:
+def row(name: str, pos: Positions, a: dict[str, np.ndarray], searches: list[TaskSearch]) -> str:
     val_rmse = np.sqrt(np.mean(np.sum((pos(a["val_x"]) - a["val_y"]) ** 2, -1)))
     real_moves = np.linalg.norm(np.diff(pos(a["val_paths"]), axis=1), axis=-1)
     warping, largest, first = [], [], []
-    for plans, z, _, _ in searches:
-        xy = pos(plans)
-        prev = np.concatenate([np.broadcast_to(pos(z), (len(xy), 1, 2)), xy[:, :-1]], axis=1)
-        steps = np.linalg.norm(xy - prev, axis=-1)[:, :-1]
+    for search in searches:
+        steps = estimated_steps(pos, search.plans, search.z)[:, :-1]
         warping.append(f"{100 * (steps.max(1) > WARP).mean():.0f}%")
         largest.append(np.median(steps.max(1)))
         first.append(np.median(steps[:, 0]))
@@ -101,8 +78,10 @@ def main(argv: list[str]) -> int:
     set_threads(cfg.eval.threads or 1)
     a = store_arrays(cfg)
     t0 = time.time()
-    searches, shipped = search_plans(cfg)
-    print(f"searched in {time.time() - t0:.0f}s; plans per task {[len(s[0]) for s in searches]}", flush=True)
+    planner, episodes, _, _ = visual_planner(cfg)
+    searches = [search_task(cfg, planner, episodes, task) for task in cfg.eval.tasks]
+    shipped = episodes.positions
+    print(f"searched in {time.time() - t0:.0f}s; plans per task {[len(s.plans) for s in searches]}", flush=True)
     print("| estimator | val RMSE | real 5-step move p99 / max | warping plans per task | median largest step "
           "| median first step |\n|---|---|---|---|---|---|")
     print(row("shipped", shipped, a, searches), flush=True)

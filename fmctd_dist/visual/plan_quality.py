@@ -16,7 +16,8 @@ frames encoded as in an episode) this reports:
 
 from __future__ import annotations
 
-from typing import Any
+from dataclasses import dataclass
+from typing import Any, Callable
 
 import numpy as np
 
@@ -35,47 +36,80 @@ def nearest_distance(q: np.ndarray, ref: np.ndarray, chunk: int = 2048) -> np.nd
     return out
 
 
-def plan_quality(cfg: Config, tasks: list[int], seed: int = 0) -> dict[str, Any]:
-    """One search per task from its start frame to its goal frame; the statistics of the module docstring."""
-    from fmctd_dist.data.visual_dataset import load_visual_dataset
+@dataclass(frozen=True)
+class TaskSearch:
+    """One search from a task's start frame: every expanded node's simulated plan and the latents it planned between."""
+
+    task: int
+    plans: np.ndarray  # [N, F, D] every expanded node's simulated plan, model latents
+    z: np.ndarray  # [D] start latent (the VAE's mu of the start frame)
+    zg: np.ndarray  # [D] goal latent
+    status: str
+    stop_reason: str
+    expansions: int
+    plan_time_s: float
+
+
+def visual_planner(cfg: Config) -> tuple[Any, Any, dict[str, Any], Any]:
+    """(planner, the family's episode parts, the planner's manifest, its normaliser) for ``cfg``'s checkpoint."""
     from fmctd_dist.denoiser.local import LocalDenoiser
     from fmctd_dist.diffusion.checkpoint import normaliser_from_manifest, read_manifest
-    from fmctd_dist.hooks import hooks_for, warp_threshold
+    from fmctd_dist.hooks import hooks_for
     from fmctd_dist.planners import make_planner
-    from fmctd_dist.planners.base import plan_seed
 
     manifest = read_manifest(cfg.checkpoint_dir(), cfg)
     norm = normaliser_from_manifest(manifest)
     planner = make_planner(cfg, LocalDenoiser.from_checkpoint(cfg.checkpoint_dir(), cfg), norm)
-    episodes = hooks_for(cfg.env.name).episodes(cfg)
+    return planner, hooks_for(cfg.env.name).episodes(cfg), manifest, norm
+
+
+def search_task(cfg: Config, planner: Any, episodes: Any, task: int, seed: int = 0) -> TaskSearch:
+    """One plan call from ``task``'s start frame to its goal frame, encoded as an episode encodes them."""
+    from fmctd_dist.planners.base import plan_seed
+
+    env = episodes.env
+    env.reset(task, seed)
+    z = episodes.vae.encode(env.image()[None])[0]
+    zg = episodes.vae.encode(env.goal_image()[None])[0]
+    out = planner.plan(z, zg, plan_seed(cfg.seed, task, seed, 0))
+    r = planner.last_result
+    return TaskSearch(task, r.tree.sim_plan[1:r.expansions + 1], z, zg, out.status, r.stop_reason,
+                      r.expansions, out.plan_time_s)
+
+
+def estimated_steps(pos: Callable[[np.ndarray], np.ndarray], plans: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """[N, F] estimated world-unit step into each plan frame, the first from the start latent ``z``."""
+    xy = pos(plans)
+    prev = np.concatenate([np.broadcast_to(pos(z), (len(xy), 1, 2)), xy[:, :-1]], axis=1)
+    return np.linalg.norm(xy - prev, axis=-1)
+
+
+def plan_quality(cfg: Config, tasks: list[int], seed: int = 0) -> dict[str, Any]:
+    """One search per task from its start frame to its goal frame; the statistics of the module docstring."""
+    from fmctd_dist.data.visual_dataset import load_visual_dataset
+    from fmctd_dist.hooks import warp_threshold
+
+    planner, episodes, manifest, norm = visual_planner(cfg)
     env, pos = episodes.env, episodes.positions
     ds = load_visual_dataset(cfg)
     ref = norm.normalise(ds.train.reshape(-1, ds.train.shape[-1])[::NN_STRIDE])
     real = ds.val[:, ::NN_STRIDE]  # [E, S/5, D], 5 env steps apart like a jump-5 plan
-    real_xy = pos(real)
-    real_moves = np.linalg.norm(np.diff(real_xy, axis=1), axis=-1)
+    real_moves = np.linalg.norm(np.diff(pos(real), axis=1), axis=-1)
     rows = []
     for task in tasks:
-        env.reset(task, seed)
-        z = episodes.vae.encode(env.image()[None])[0]
-        zg = episodes.vae.encode(env.goal_image()[None])[0]
-        out = planner.plan(z, zg, plan_seed(cfg.seed, task, seed, 0))
-        r = planner.last_result
-        plans = r.tree.sim_plan[1:r.expansions + 1]  # [N, F, D] every expanded node's simulated plan
-        xy = pos(plans)
-        prev = np.concatenate([np.broadcast_to(pos(z), (len(xy), 1, 2)), xy[:, :-1]], axis=1)
-        steps = np.linalg.norm(xy - prev, axis=-1)  # [N, F]
-        to_goal = np.linalg.norm(xy - pos(zg), axis=-1).min(1)
-        nn = nearest_distance(norm.normalise(plans.reshape(-1, plans.shape[-1])), ref)
-        rows.append({"task": task, "status": out.status, "stop_reason": r.stop_reason, "expansions": r.expansions,
-                     "plan_time_s": round(out.plan_time_s, 2), "plans": len(plans),
+        s = search_task(cfg, planner, episodes, task, seed)
+        steps = estimated_steps(pos, s.plans, s.z)  # [N, F]
+        to_goal = np.linalg.norm(pos(s.plans) - pos(s.zg), axis=-1).min(1)
+        nn = nearest_distance(norm.normalise(s.plans.reshape(-1, s.plans.shape[-1])), ref)
+        rows.append({"task": task, "status": s.status, "stop_reason": s.stop_reason, "expansions": s.expansions,
+                     "plan_time_s": round(s.plan_time_s, 2), "plans": len(s.plans),
                      "warp_fraction": float((steps[:, :-1].max(1) > warp_threshold(cfg)).mean()),
                      "median_max_step": float(np.median(steps[:, :-1].max(1))),
                      "median_first_step": float(np.median(steps[:, 0])),
                      "median_closest_to_goal": float(np.median(to_goal)),
                      "median_nn_distance": float(np.median(nn)),
-                     "start_estimate_error": float(np.linalg.norm(pos(z) - env.position())),
-                     "goal_estimate_error": float(np.linalg.norm(pos(zg) - env.goal))})
+                     "start_estimate_error": float(np.linalg.norm(pos(s.z) - env.position())),
+                     "goal_estimate_error": float(np.linalg.norm(pos(s.zg) - env.goal))})
     real_nn = nearest_distance(norm.normalise(real.reshape(-1, real.shape[-1])), ref)
     return {"checkpoint": shown(cfg.checkpoint_dir()), "digest": manifest["digest"],
             "train_steps": manifest.get("train_steps"), "val_loss": manifest.get("final_losses", {}).get("val"),
