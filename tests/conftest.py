@@ -16,6 +16,17 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 JOBS = Path(__file__).resolve().parent.parent / "jobs"
 
 
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Under pytest-xdist (``-n 2`` in pyproject), every test that uses Ray runs in one worker, in turn.
+
+    One session cluster then serves them all (a second worker's cluster would contend for the
+    dashboard agent's ports) and no two Ray tests share the 2 cores; pure tests fill the other worker.
+    """
+    for item in items:
+        if item.get_closest_marker("ray") or "ray_cluster" in getattr(item, "fixturenames", ()):
+            item.add_marker(pytest.mark.xdist_group("ray"))
+
+
 def load_job(name: str) -> ModuleType:
     """A script under jobs/ (not a package) imported as a module, so tests call its functions."""
     spec = importlib.util.spec_from_file_location(name, JOBS / f"{name}.py")
