@@ -18,13 +18,14 @@ machine (no ``results/``) adds rows without losing earlier sessions' ones.
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import pyarrow as pa
 import pyarrow.parquet as pq
 
 from fmctd_dist.cli import run
-from fmctd_dist.config import REPO_ROOT, load_config, resolve_path
+from fmctd_dist.config import REPO_ROOT, Config, load_config, resolve_path
 from fmctd_dist.envs import maze_geometry
 from fmctd_dist.evaluation.identity import config_hash
 from fmctd_dist.evaluation.plots import plot_ablation, plot_episode, plot_success_vs_time
@@ -49,6 +50,12 @@ def parse(argv: list[str]) -> dict[str, str]:
                               + ", ".join(f"{k}=<path>" for k in opts))
         opts[key] = value
     return opts
+
+
+def shipped_digest(cfg: Config) -> str:
+    """The digest of the checkpoint ``cfg`` names today ("" when it is not on this machine)."""
+    path = cfg.checkpoint_dir() / "manifest.json"
+    return json.loads(path.read_text()).get("digest", "") if path.exists() else ""
 
 
 def main(argv: list[str]) -> int:
@@ -96,9 +103,11 @@ def main(argv: list[str]) -> int:
     # the robot table: every archived cube episode made with today's default config of its method and env
     hashes = {(m, e): config_hash(load_config([f"env={e}", f"method={m}"]))
               for e in CUBE_ENV_ORDER for m in CUBE_METHOD_ORDER}
+    shipped = {(m, e): shipped_digest(load_config([f"env={e}", f"method={m}"]))
+               for e in CUBE_ENV_ORDER for m in CUBE_METHOD_ORDER}
     robot, dropped = current_rows(archived_rows, hashes)
     if robot:
-        sections["robot"] = maze_table(robot, CUBE_ENV_ORDER, CUBE_METHOD_ORDER, dropped)
+        sections["robot"] = maze_table(robot, CUBE_ENV_ORDER, CUBE_METHOD_ORDER, dropped, shipped)
 
     text = fill_markers(doc.read_text(), sections)
     doc.write_text(text)

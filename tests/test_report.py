@@ -137,6 +137,26 @@ def test_robot_table_takes_each_episode_of_todays_default_config_once():
     assert "| mctd-replan | cube-triple | not run |" in table and "| mctd | " not in table
 
 
+def test_robot_table_marks_lines_on_weights_that_are_no_longer_shipped():
+    """A config names its checkpoint by path: rows made before the weights there were replaced keep the
+    config hash, and only their digest tells them apart. Such a line says so; lines on today's weights do not."""
+    def cube(task, seed, digest, method):
+        return {**row(task, seed, True, method=method, env="cube-triple"), "run": "grid", "config_hash": "now",
+                "checkpoint_digest": digest, "episode_time_limit": 0.0}
+
+    methods = ("s-mctd-replan", "fast-mctd-replan")
+    hashes = {(m, "cube-triple"): "now" for m in methods}
+    rows = ([cube(k, s, "old" * 6, "s-mctd-replan") for k in (1, 2) for s in (0, 1)]
+            + [cube(k, s, d * 16, "fast-mctd-replan") for d in "ab" for k in (1, 2) for s in (0, 1)])
+    cur, dropped = current_rows(rows, hashes)
+    shipped = {(m, "cube-triple"): "b" * 16 for m in methods}
+    table = maze_table(cur, CUBE_ENV_ORDER, CUBE_METHOD_ORDER, dropped, shipped)
+    assert "| s-mctd-replan (older weights oldoldol; shipped: bbbbbbbb) | cube-triple | 4 (2 x 2) |" in table
+    assert "| fast-mctd-replan [config now, ckpt aaaaaaaa] (older weights; shipped: bbbbbbbb) |" in table
+    assert "| fast-mctd-replan [config now, ckpt bbbbbbbb] | cube-triple |" in table
+    assert maze_table(cur, CUBE_ENV_ORDER, CUBE_METHOD_ORDER, dropped).count("older weights") == 0  # none known
+
+
 def test_report_archives_rows_of_hand_written_sections_without_their_trajectories(tmp_path):
     """jobs/report.py keeps the rows of runs cited by hand-written sections (cube, visual, benches) in
     eval_rows.parquet, scalars only, beside the tabulated runs; uncited runs stay out."""

@@ -133,11 +133,24 @@ def current_rows(rows: list[dict[str, Any]],
     return out, dropped
 
 
+def _method_cell(s: dict[str, Any], shipped: dict[tuple[str, str], str] | None) -> str:
+    """The line's method cell; lines whose weights are not the checkpoint shipped today say so.
+
+    A config names its checkpoint by path, so rows made before the weights at that path were replaced
+    keep today's config hash: only the recorded digest tells them apart."""
+    now = (shipped or {}).get((s["method"], s["env"]))
+    if not now or str(s.get("checkpoint_digest")) == now:
+        return label(s)
+    which = "" if s.get("variant") else f" {str(s['checkpoint_digest'])[:8]}"  # a variant's label names its digest
+    return f"{label(s)} (older weights{which}; shipped: {now[:8]})"
+
+
 def maze_table(rows: list[dict[str, Any]], envs: list[str] = ENV_ORDER, methods: list[str] = METHOD_ORDER,
-               dropped: dict[tuple, int] | None = None) -> str:
+               dropped: dict[tuple, int] | None = None, shipped: dict[tuple[str, str], str] | None = None) -> str:
     """The paper's Table "Maze results" for ``envs``: one line per (method, env) in the paper's order
-    (``methods``; the robot table passes the cube envs and the replanning methods, and ``dropped``
-    from :func:`current_rows`, said in the episodes cell)."""
+    (``methods``; the robot table passes the cube envs and the replanning methods, ``dropped``
+    from :func:`current_rows`, said in the episodes cell, and ``shipped``: the digest of each
+    (method, env)'s default checkpoint today, so that a line on older weights is marked)."""
     summary = summarise(rows)
     key: dict[tuple[str, str], list[dict[str, Any]]] = {}
     for s in summary:
@@ -156,7 +169,7 @@ def maze_table(rows: list[dict[str, Any]], envs: list[str] = ENV_ORDER, methods:
                 partial = (dropped or {}).get((m, env, s["identity"]), 0)
                 more = f"; {partial} more of unfinished seeds not counted" if partial else ""
                 lines.append(
-                    f"| {label(s)} | {env} | {s['episodes']} ({n_tasks} x {s['seeds']}{more}) | "
+                    f"| {_method_cell(s, shipped)} | {env} | {s['episodes']} ({n_tasks} x {s['seeds']}{more}) | "
                     f"{_pm(s['success'], s['success_std'])}{timed_out} | {_pm(s['plan_time_s'], s['plan_time_std'], '.2f')} | "
                     f"{_shares(s)} | {'/'.join(f'{v:.0f}' for v in s['per_task'].values())} | "
                     f"{paper_cell(m, env)} |")
