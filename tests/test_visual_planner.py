@@ -232,6 +232,23 @@ def test_fast_mctd_runs_task1_seed0_with_the_shipped_models():
 
 @needs_shipped
 @needs_latents
+def test_context_probe_prints_a_row_per_start_kind(monkeypatch, capsys):
+    """jobs/visual_context_probe.py on 2 validation starts and one reset start: one row each, steps in range."""
+    from conftest import load_job
+
+    probe = load_job("visual_context_probe")
+    monkeypatch.setattr(probe, "WINDOWS", 2)
+    with torch_threads(1):
+        assert probe.main(["tasks=[3]"]) == 0
+    rows = [ln.split(" | ") for ln in capsys.readouterr().out.splitlines() if ln.startswith(("| validation", "| reset"))]
+    assert [(r[0], r[1]) for r in rows] == [("| validation", "2"), ("| reset", "1")]
+    assert rows[1][3] == "–" and float(rows[0][3].split(" / ")[0]) < 2.5  # a real 5-step move is at most ~2.5 units
+    boundary, inside = (float(v) for v in rows[0][5].rstrip(" |").split(" / "))
+    assert boundary > 0 and inside > 0
+
+
+@needs_shipped
+@needs_latents
 def test_plan_quality_reports_warps_and_manifold_distance():
     """jobs/visual_plan_quality.py's measure on a small search: shapes and ranges of every statistic."""
     from fmctd_dist.visual.plan_quality import nearest_distance, plan_quality
