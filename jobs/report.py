@@ -101,10 +101,9 @@ def main(argv: list[str]) -> int:
     all_rows += archived_rows
 
     # the robot table: every archived cube episode made with today's default config of its method and env
-    hashes = {(m, e): config_hash(load_config([f"env={e}", f"method={m}"]))
-              for e in CUBE_ENV_ORDER for m in CUBE_METHOD_ORDER}
-    shipped = {(m, e): shipped_digest(load_config([f"env={e}", f"method={m}"]))
-               for e in CUBE_ENV_ORDER for m in CUBE_METHOD_ORDER}
+    defaults = {(m, e): load_config([f"env={e}", f"method={m}"]) for e in CUBE_ENV_ORDER for m in CUBE_METHOD_ORDER}
+    hashes = {k: config_hash(c) for k, c in defaults.items()}
+    shipped = {k: shipped_digest(c) for k, c in defaults.items()}
     robot, dropped = current_rows(archived_rows, hashes)
     if robot:
         sections["robot"] = maze_table(robot, CUBE_ENV_ORDER, CUBE_METHOD_ORDER, dropped, shipped)

@@ -25,7 +25,7 @@ import numpy as np
 from fmctd_dist.cli import run
 from fmctd_dist.config import load_config
 from fmctd_dist.device import set_threads
-from fmctd_dist.visual.plan_quality import visual_planner
+from fmctd_dist.visual.plan_quality import task_latents, visual_planner
 
 WINDOWS = 20  # validation starts
 
@@ -37,7 +37,7 @@ def main(argv: list[str]) -> int:
                        "method.guidance_scale=0.0"] + argv, env="visual-pointmaze-medium")
     set_threads(cfg.eval.threads or 1)
     planner, episodes, manifest, norm = visual_planner(cfg)
-    pos, env, jump = episodes.positions, episodes.env, cfg.jump
+    pos, jump = episodes.positions, cfg.jump
     val = load_visual_dataset(cfg).val  # [E, S, D] the held-out episodes' mu
     span = cfg.env.horizon - jump
     rng = np.random.default_rng(0)
@@ -46,9 +46,7 @@ def main(argv: list[str]) -> int:
         e, t = int(rng.integers(len(val))), int(rng.integers(val.shape[1] - span))
         starts.append(("validation", val[e, t], val[e, t + span], val[e, t + jump]))
     for task in cfg.eval.tasks:
-        env.reset(task, 0)
-        starts.append(("reset", episodes.vae.encode(env.image()[None])[0],
-                       episodes.vae.encode(env.goal_image()[None])[0], None))
+        starts.append(("reset", *task_latents(episodes, task), None))
     stats: dict[str, dict[str, list[float]]] = {}
     for i, (kind, z, zg, nxt) in enumerate(starts):
         plan = planner.plan(z, zg, i).waypoints[::jump]  # [F, D] one frame per plan step

@@ -63,14 +63,18 @@ def visual_planner(cfg: Config) -> tuple[Any, Any, dict[str, Any], Any]:
     return planner, hooks_for(cfg.env.name).episodes(cfg), manifest, norm
 
 
+def task_latents(episodes: Any, task: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """(start, goal) latents of ``task``: the env reset, its start and goal frames encoded as an episode encodes them."""
+    env = episodes.env
+    env.reset(task, seed)
+    return episodes.vae.encode(env.image()[None])[0], episodes.vae.encode(env.goal_image()[None])[0]
+
+
 def search_task(cfg: Config, planner: Any, episodes: Any, task: int, seed: int = 0) -> TaskSearch:
     """One plan call from ``task``'s start frame to its goal frame, encoded as an episode encodes them."""
     from fmctd_dist.planners.base import plan_seed
 
-    env = episodes.env
-    env.reset(task, seed)
-    z = episodes.vae.encode(env.image()[None])[0]
-    zg = episodes.vae.encode(env.goal_image()[None])[0]
+    z, zg = task_latents(episodes, task, seed)
     out = planner.plan(z, zg, plan_seed(cfg.seed, task, seed, 0))
     r = planner.last_result
     return TaskSearch(task, r.tree.sim_plan[1:r.expansions + 1], z, zg, out.status, r.stop_reason,
