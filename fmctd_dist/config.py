@@ -247,6 +247,12 @@ class TrainConfig:
     # the paper's). Leaves p(plan | start) unchanged; see fmctd_dist.data.windows.start_balance_cdf.
     start_balance: float = spec(0.0, ge=0, le=1, why="windows are drawn with weight count(start cell)**-start_balance "
                                                      "(0 = uniform, the paper's; 1 = every start cell alike)")
+    # Recipe lever against the plans' jumps at token boundaries (results §4): an extra loss on the step
+    # across each token boundary (last frame of token k -> first frame of token k+1, the context token
+    # included), predicted against true, min-SNR-weighted by the noisier of the two tokens. The
+    # conditional mean still minimises it, so it re-weights toward tokens' relative offsets without
+    # changing the optimum. 0 = off (the paper's).
+    boundary_weight: float = spec(0.0, ge=0, why="weight of the token-boundary step loss (0 = off, the paper's)")
     # constant (paper): warm-up then train.lr; cosine: warm-up then cosine decay to 0 at the run's end
     # (train.max_steps, or train.time_budget_s of recorded wall time if that comes first); wsd
     # (warm-up, stable, decay): constant, then linear to 0 over the last train.decay_steps steps before

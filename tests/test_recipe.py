@@ -27,12 +27,13 @@ LEVERS = {"model.param=v": ("model", "param"), "model.param=v_offset": ("model",
           "model.norm=pre": ("model", "norm"), "train.lr_schedule=cosine": ("train", "lr_schedule"),
           "train.lr_schedule=wsd": ("train", "lr_schedule"),
           "train.precision=bf16": ("train", "precision"),
-          "diffusion.guidance_path=network": ("diffusion", "guidance_path")}
+          "diffusion.guidance_path=network": ("diffusion", "guidance_path"),
+          "train.boundary_weight=2.0": ("train", "boundary_weight")}
 MODEL_LEVERS = ("model.param=v", "model.param=v_offset", "model.norm=pre")
-RECIPE_FIELDS = {"model": ("param", "norm"), "train": ("lr_schedule", "precision", "time_budget_s"),
+RECIPE_FIELDS = {"model": ("param", "norm"), "train": ("lr_schedule", "precision", "time_budget_s", "boundary_weight"),
                  "diffusion": ("guidance_path",)}
 PAPER = {"model": {"param": "x0", "norm": "post"}, "train": {"lr_schedule": "constant", "precision": "fp32",
-                                                              "time_budget_s": 0.0},
+                                                              "time_budget_s": 0.0, "boundary_weight": 0.0},
          "diffusion": {"guidance_path": "input"}}
 
 
@@ -56,7 +57,7 @@ def test_lever_is_selectable_and_recorded_in_the_manifest(tmp_path, lever):
     assert out["step"] == 6 and np.isfinite(out["final_losses"]["train"])
     manifest = json.loads((tmp_path / MANIFEST_FILE).read_text())
     group, name = LEVERS[lever]
-    assert manifest["config"][group][name] == lever.split("=")[1]
+    assert str(manifest["config"][group][name]) == lever.split("=")[1]
     model, _ = load_checkpoint(tmp_path, cfg)
     if lever in MODEL_LEVERS:
         assert getattr(model, name) == lever.split("=")[1]
@@ -233,3 +234,21 @@ def test_cpu_budget_clock_counts_process_cpu_time(tmp_path):
     manifest = json.loads((tmp_path / MANIFEST_FILE).read_text())
     assert manifest["cpu_time_s"] >= 0.5 and manifest["wall_time_s"] > manifest["cpu_time_s"]
     assert manifest["config"]["train"]["budget_clock"] == "cpu" and out["step"] > 0
+
+
+# ------------------------------------------------------------------ the token-boundary loss
+
+def test_boundary_loss_sees_per_token_offsets_and_not_shared_ones():
+    from fmctd_dist.diffusion.train import boundary_loss
+
+    gen = torch.Generator().manual_seed(0)
+    x0 = torch.randn(3, 5, 2 * 4, generator=gen)  # 5 tokens of 4 two-dimensional frames
+    weight = torch.ones(3, 5)
+    assert float(boundary_loss(x0, x0, weight, 4)) == 0.0
+    shared = x0 + 0.3  # every token off by the same amount: the steps across boundaries are exact
+    assert float(boundary_loss(shared, x0, weight, 4)) == pytest.approx(0.0, abs=1e-12)
+    offsets = x0.clone()
+    offsets[:, 2] += 0.5  # one token shifted: the steps into and out of it are both 0.5 off per coordinate
+    assert float(boundary_loss(offsets, x0, weight, 4)) == pytest.approx(2 * 0.25 / 4)
+    weight[:, 2] = 0.0  # a boundary counts with its noisier (lower-weighted) token's weight
+    assert float(boundary_loss(offsets, x0, weight, 4)) == 0.0
