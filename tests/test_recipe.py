@@ -252,3 +252,20 @@ def test_boundary_loss_sees_per_token_offsets_and_not_shared_ones():
     assert float(boundary_loss(offsets, x0, weight, 4)) == pytest.approx(2 * 0.25 / 4)
     weight[:, 2] = 0.0  # a boundary counts with its noisier (lower-weighted) token's weight
     assert float(boundary_loss(offsets, x0, weight, 4)) == 0.0
+
+
+def test_validation_loss_leaves_the_boundary_term_out_so_arms_compare():
+    from test_train_loop import FakeData as Data
+
+    from fmctd_dist.diffusion.train import DFLoss, validation_loss
+
+    cfg, cfg_bw = tiny_cfg(1), tiny_cfg(1, "train.boundary_weight=3")
+    torch.manual_seed(0)
+    model = DFTransformer.from_config(cfg.model, cfg.n_tokens)
+    batches = [torch.as_tensor(Data().windows[:4])]
+    plain, with_bw = DFLoss(cfg, torch.device("cpu")), DFLoss(cfg_bw, torch.device("cpu"))
+    dev = torch.device("cpu")
+    assert validation_loss(model, with_bw, batches, dev) == validation_loss(model, plain, batches, dev)
+    gen = lambda: torch.Generator().manual_seed(1)  # noqa: E731
+    with torch.no_grad():  # training sees the term
+        assert float(with_bw(model, batches[0], gen())) > float(plain(model, batches[0], gen()))

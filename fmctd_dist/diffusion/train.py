@@ -75,8 +75,13 @@ class DFLoss(torch.nn.Module):
         self.frame_stack = cfg.model.frame_stack
         self.boundary_weight = cfg.train.boundary_weight
 
-    def forward(self, model: DFTransformer, x0: torch.Tensor, gen: torch.Generator) -> torch.Tensor:
-        """x0: [B, T, D] clean normalised tokens -> scalar loss; all randomness from ``gen``."""
+    def forward(self, model: DFTransformer, x0: torch.Tensor, gen: torch.Generator,
+                boundary: bool = True) -> torch.Tensor:
+        """x0: [B, T, D] clean normalised tokens -> scalar loss; all randomness from ``gen``.
+
+        ``boundary=False`` leaves out the train.boundary_weight term: the validation loss is the
+        token loss alone, so it compares between recipe arms.
+        """
         b, t, _ = x0.shape
         dev = x0.device
         k = torch.randint(0, self.timesteps, (b, t), generator=gen, device=dev)
@@ -90,7 +95,7 @@ class DFLoss(torch.nn.Module):
         xt = self.sqrt_ab[k][..., None] * x0 + self.sqrt_1m_ab[k][..., None] * noise
         pred = model(xt, k)
         loss = (weight[..., None] * (pred - x0).square()).mean()
-        if self.boundary_weight:
+        if boundary and self.boundary_weight:
             loss = loss + self.boundary_weight * boundary_loss(pred, x0, weight, self.frame_stack)
         return loss
 
@@ -214,7 +219,8 @@ def validation_loss(model: DFTransformer, loss_fn: DFLoss, batches: list[torch.T
     was_training = model.training
     model.eval()
     gen = torch.Generator(device=device).manual_seed(VAL_NOISE_SEED)
-    total = sum(float(loss_fn(model, x, gen)) for x in batches)
+    kw = {"boundary": False} if isinstance(loss_fn, DFLoss) else {}
+    total = sum(float(loss_fn(model, x, gen, **kw)) for x in batches)
     model.train(was_training)
     return total / max(len(batches), 1)
 
