@@ -2,6 +2,7 @@
 
     python jobs/bench_denoiser.py                                  # every shipped checkpoint
     python jobs/bench_denoiser.py checkpoints/pointmaze-medium-h5  # one
+    python jobs/bench_denoiser.py samples=100 A B                  # 100 plans per task start (default 20)
     python jobs/bench_denoiser.py --throughput options=fp32,bf16,compiled,bf16+compiled   # speed per option
     python jobs/bench_denoiser.py --precision checkpoints/pointmaze-medium-h1   # why plans warp
     python jobs/bench_denoiser.py --cube checkpoints/cube-single-h5   # cube models (also picked out of the default list)
@@ -31,7 +32,7 @@ import torch
 from fmctd_dist.config import REPO_ROOT, Config, apply_override, config_from_dict, validate
 from fmctd_dist.denoiser.runtime import option_settings
 from fmctd_dist.diffusion.model import DFTransformer
-from fmctd_dist.evaluation.plan_quality import plan_quality, precision
+from fmctd_dist.evaluation.plan_quality import SAMPLES_PER_TASK, plan_quality, precision
 from fmctd_dist.families import family
 
 
@@ -243,21 +244,26 @@ def main(argv: list[str]) -> None:
         print("\n".join(cube_lines([Path(a) for a in argv[1:] if "=" not in a], words)))
         return
     # every shipped planning model (DF or Diffuser); other checkpoints (the ant expert) have no model_kind
-    ckpts = [Path(a) for a in argv] or sorted(p.parent for p in (REPO_ROOT / "checkpoints").glob("*/manifest.json")
+    words = dict(a.split("=", 1) for a in argv if "=" in a)  # samples=N: plans per task start (default 20)
+    if set(words) - {"samples"}:
+        raise SystemExit(f"bench_denoiser: unknown {sorted(set(words) - {'samples'})}; the quality mode takes samples=N")
+    per_task = int(words.get("samples", SAMPLES_PER_TASK))
+    ckpts = [Path(a) for a in argv if "=" not in a] or sorted(p.parent for p in (REPO_ROOT / "checkpoints").glob("*/manifest.json")
                                               if "model_kind" in json.loads(p.read_text()))
     cubes = [c for c in ckpts if family(json.loads((c / "manifest.json").read_text())["config"]["env"]["name"]) == "cube"]
     ckpts = [c for c in ckpts if c not in cubes]
     if cubes:
         print("\n".join(cube_lines(cubes)) + "\n")
+    print(f"{5 * per_task} unguided and {5 * per_task} guided plans per checkpoint (same noise for every checkpoint)")
     print("| checkpoint | steps | params | val loss | train h | unguided: no warp / in free cells | "
-          "guided: no warp / in free cells / within 2.0 of goal |")
-    print("|---|---|---|---|---|---|---|")
+          "guided: no warp / in free cells / within 2.0 of goal | guided boundary / inside step |")
+    print("|---|---|---|---|---|---|---|---|")
     for ckpt in ckpts:
-        r = plan_quality(ckpt)
+        r = plan_quality(ckpt, samples_per_task=per_task)
         print(f"| {r['checkpoint']} | {r['steps']} | {r['params']:,} | {r['val_loss'] if r['val_loss'] is None else round(r['val_loss'], 4)} | {r['train_h']:.2f} | "
               f"{100 * r['unguided_no_warp']:.0f}% / {100 * r['unguided_in_free']:.1f}% | "
               f"{100 * r['guided_no_warp']:.0f}% / {100 * r['guided_in_free']:.1f}% / "
-              f"{100 * r['guided_near_goal']:.0f}% |")
+              f"{100 * r['guided_near_goal']:.0f}% | {r['guided_boundary_step']:.2f} / {r['guided_inside_step']:.2f} |")
 
 
 if __name__ == "__main__":
