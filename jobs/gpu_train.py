@@ -16,7 +16,8 @@ is importable:
    jobs/make_dataset.py, all at once in parallel (about 2 min each on one core here).
 3. training: pointmaze-{medium,large,giant}-h5 run concurrently on the one GPU, each a
    jobs/train.py subprocess at batch 1024 (the paper's) with train.time_budget_s=--budget-s
-   and the boundary loss (train.boundary_weight=3; train.boundary_weight=0 as an extra word = the paper's),
+   (no boundary loss: at H=5 it traded Fast-MCTD success for warp-free plans, results 4; add
+   train.boundary_weight=3 as an extra word to get it),
    device=cuda, into runs/gpu/<env>-h5 (resumable like every run).
 4. output: model.pt + manifest.json of each model copied to OUT_DIR/<env>-h5/ (6 files of
    about 5 MB for the 6 x 128 model), plus OUT_DIR/train_logs.txt (7 files in all).
@@ -99,8 +100,7 @@ def main(argv: list[str]) -> int:
     envs = [e for e in args.envs.split(",") if e]
     env = install({**os.environ, "PYTHONUNBUFFERED": "1"})
     words = ["jump=5", f"train.batch_size={PAPER_BATCH}", "device=cuda", f"train.time_budget_s={args.budget_s}",
-             "train.max_steps=1000000", "train.ckpt_every=1000",
-             "train.boundary_weight=3"]  # the project's recipe lever (results 4, "The token-boundary loss")
+             "train.max_steps=1000000", "train.ckpt_every=1000"]
     if args.dry_run:
         words = [w for w in words if not w.startswith(("train.batch_size", "device", "train.time_budget_s"))]
         words += DRY + [f"data.root={args.runs / 'data'}", "train.time_budget_s=2"]

@@ -26,4 +26,3 @@ def test_gpu_train_dry_run_writes_a_checkpoint_per_maze(tmp_path):
         manifest = json.loads((out / f"pointmaze-{m}-h5" / "manifest.json").read_text())
         assert manifest["config"]["env"]["name"] == f"pointmaze-{m}" and manifest["config"]["jump"] == 5
         assert manifest["config"]["train"]["time_budget_s"] == 2.0 and manifest["train_steps"] > 0
-        assert manifest["config"]["train"]["boundary_weight"] == 3.0  # the project's recipe, not the paper's
