@@ -6,9 +6,9 @@ model + manifest + train_state every ``ckpt_every`` steps; rerunning the same co
 continues from the last save with optimiser and RNG states restored, so a killed run and
 an uninterrupted one produce the same weights (bitwise on CPU). ``train.time_budget_s`` stops
 a run once its recorded wall time (or, ``train.budget_clock=cpu``, its CPU time) reaches the budget
-(recipe arms at equal compute); the
-recipe levers ``train.lr_schedule`` and ``train.precision`` (bf16 autocast of the training
-step) default to the paper's constant LR and fp32.
+(recipe arms at equal compute); the recipe levers ``train.lr_schedule``, ``train.precision``
+(bf16 autocast of the training step) and ``train.boundary_weight`` (a loss on the steps across
+token boundaries) default to the paper's constant LR, fp32 and plain token loss.
 """
 
 from __future__ import annotations
