@@ -17,7 +17,7 @@ from fmctd_dist.diffusion.checkpoint import MANIFEST_FILE, load_checkpoint, writ
 from fmctd_dist.diffusion.model import DFTransformer
 from fmctd_dist.diffusion.sampler import GUIDANCE_GAIN, goal_reward, make_consts, transition
 from fmctd_dist.diffusion.schedule import PyramidSchedule
-from fmctd_dist.diffusion.train import lr_at, train
+from fmctd_dist.diffusion.train import DFLoss, boundary_loss, lr_at, train, validation_loss
 from fmctd_dist.errors import CheckpointError, ConfigError
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
@@ -239,8 +239,6 @@ def test_cpu_budget_clock_counts_process_cpu_time(tmp_path):
 # ------------------------------------------------------------------ the token-boundary loss
 
 def test_boundary_loss_sees_per_token_offsets_and_not_shared_ones():
-    from fmctd_dist.diffusion.train import boundary_loss
-
     gen = torch.Generator().manual_seed(0)
     x0 = torch.randn(3, 5, 2 * 4, generator=gen)  # 5 tokens of 4 two-dimensional frames
     weight = torch.ones(3, 5)
@@ -255,16 +253,12 @@ def test_boundary_loss_sees_per_token_offsets_and_not_shared_ones():
 
 
 def test_validation_loss_leaves_the_boundary_term_out_so_arms_compare():
-    from test_train_loop import FakeData as Data
-
-    from fmctd_dist.diffusion.train import DFLoss, validation_loss
-
     cfg, cfg_bw = tiny_cfg(1), tiny_cfg(1, "train.boundary_weight=3")
     torch.manual_seed(0)
     model = DFTransformer.from_config(cfg.model, cfg.n_tokens)
-    batches = [torch.as_tensor(Data().windows[:4])]
-    plain, with_bw = DFLoss(cfg, torch.device("cpu")), DFLoss(cfg_bw, torch.device("cpu"))
+    batches = [torch.as_tensor(FakeData().windows[:4])]
     dev = torch.device("cpu")
+    plain, with_bw = DFLoss(cfg, dev), DFLoss(cfg_bw, dev)
     assert validation_loss(model, with_bw, batches, dev) == validation_loss(model, plain, batches, dev)
     gen = lambda: torch.Generator().manual_seed(1)  # noqa: E731
     with torch.no_grad():  # training sees the term

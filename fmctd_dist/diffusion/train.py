@@ -171,8 +171,7 @@ def vs_paper(cfg: Config, step: int) -> str:
         parts.append(f"{cfg.model.layers} of the paper's {paper['layers']} layers (width {cfg.model.width})")
     if cfg.train.init_from:
         parts.append(f"started from the weights of {cfg.train.init_from} (its steps not counted here)")
-    levers = {"model.param": cfg.model.param, "model.norm": cfg.model.norm, "train.lr_schedule": cfg.train.lr_schedule,
-              "train.precision": cfg.train.precision, "train.boundary_weight": cfg.train.boundary_weight}
+    levers = {k: getattr(getattr(cfg, k.split(".")[0]), k.split(".")[1]) for k in PAPER_RECIPE}
     changed = [f"{k}={v}" for k, v in levers.items() if v != PAPER_RECIPE[k]]
     if changed:
         parts.append("recipe " + ", ".join(changed) + " (paper " + ", ".join(
