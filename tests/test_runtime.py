@@ -197,3 +197,12 @@ def test_peak_matmul_stays_within_its_time_budget():
     flops, n = bench.peak_flops(torch.float32, n_max=2048, reps=1, budget_s=0.0)
     assert n == 256 and flops > 0
     assert bench.peak_flops(torch.float32, n_max=512, reps=1, budget_s=1e9)[1] == 512
+
+
+def test_bench_denoiser_quality_mode_names_an_unknown_word():
+    """The quality mode takes checkpoint dirs and samples=N; any other key=value is one clear error."""
+    from conftest import load_job
+
+    bench = load_job("bench_denoiser")
+    with pytest.raises(SystemExit, match=r"unknown \['sample'\]; the quality mode takes samples=N"):
+        bench.main(["sample=100", "checkpoints/pointmaze-medium-h5"])
