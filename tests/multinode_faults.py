@@ -149,16 +149,21 @@ def main() -> None:
             # Find every actor's node first, then remove at the first row: then each pair still has an episode
             # running or queued (4 keys, 2 pairs), so a removed pair actor always loses work. An idle denoiser
             # on the removed node loses none (Ray restarts it), so the node is chosen by its pair actors.
-            deadline = time.monotonic() + 120
+            # An actor answers its info call once its worker process is up; on a loaded CI machine (two
+            # pytest workers, six actors starting on two cores) that took over 30 s, and an actor that had
+            # not answered counted as on no node. Its episode runs after the info call, so waiting costs no
+            # fault timing: the first row cannot exist before every pair actor answered.
+            deadline = time.monotonic() + 240
             while (len(WHERE) < 2 or not POOLS) and time.monotonic() < deadline:
                 time.sleep(0.02)
             where = [("denoiser", i["node_id"]) for pool in POOLS for i in pool.infos]
             for refs in list(WHERE):
                 for ref, kind in refs:
                     try:
-                        where.append((kind, ray.get(ref, timeout=30)["node_id"]))
-                    except Exception:  # noqa: BLE001 - an actor that is already gone
-                        pass
+                        where.append((kind, ray.get(ref, timeout=max(1.0, deadline - time.monotonic()))["node_id"]))
+                    except Exception as e:  # noqa: BLE001 - an actor that is already gone
+                        killed.setdefault("lookup_errors", []).append(f"{kind}: {type(e).__name__}")
+            killed["placement"] = {n[:8]: sorted(k for k, m in where if m == n) for n in {m for _, m in where}}
             if not wait_rows("node", 1):
                 return
             by_node = {w.node_id: w for w in workers}
