@@ -30,7 +30,8 @@ from fmctd_dist.envs import maze_geometry
 from fmctd_dist.evaluation.identity import config_hash
 from fmctd_dist.evaluation.plots import plot_ablation, plot_episode, plot_success_vs_time
 from fmctd_dist.evaluation.report import ABLATIONS, ANT_ENV_ORDER, CUBE_ENV_ORDER, CUBE_METHOD_ORDER, ENV_ORDER, \
-    ablation_summary, ablation_table, current_rows, fill_markers, load_rows, maze_table, merge_rows, row_key
+    METHOD_ORDER, ablation_summary, ablation_table, current_rows, fill_markers, load_rows, maze_table, \
+    merge_rows, row_key
 from fmctd_dist.evaluation.results import summarise
 from fmctd_dist.errors import ConfigError
 
@@ -58,6 +59,12 @@ def shipped_digest(cfg: Config) -> str:
     return json.loads(path.read_text()).get("digest", "") if path.exists() else ""
 
 
+def shipped_digests(envs: list[str], methods: list[str]) -> dict[tuple[str, str], str]:
+    """Per (method, env): the digest of its default checkpoint today, so a table line on weights that were
+    replaced since (same path, so same config hash) is marked "older weights" instead of passing for today's."""
+    return {(m, e): shipped_digest(load_config([f"env={e}", f"method={m}"])) for e in envs for m in methods}
+
+
 def main(argv: list[str]) -> int:
     opts = parse(argv)
     root, doc, figures = resolve_path(opts["results"]), resolve_path(opts["doc"]), resolve_path(opts["figures"])
@@ -75,9 +82,10 @@ def main(argv: list[str]) -> int:
     all_rows += main_rows
     if main_rows:
         point_rows = [r for r in main_rows if r["env"] in ENV_ORDER]
-        sections["maze"] = maze_table(point_rows)
+        sections["maze"] = maze_table(point_rows, shipped=shipped_digests(ENV_ORDER, METHOD_ORDER))
         if any(r["env"] in ANT_ENV_ORDER for r in main_rows):
-            sections["antmaze"] = maze_table(main_rows, ANT_ENV_ORDER)
+            sections["antmaze"] = maze_table(main_rows, ANT_ENV_ORDER,
+                                             shipped=shipped_digests(ANT_ENV_ORDER, METHOD_ORDER))
         plot_success_vs_time(summarise(point_rows), figures / "success_vs_time.png")
         for env in ENV_ORDER + ANT_ENV_ORDER:  # one Fast-MCTD plan per maze, drawn with what the controller executed
             # committed rows carry no trajectories: a maze without fresh rows keeps its figure

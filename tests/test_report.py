@@ -180,3 +180,29 @@ def test_report_archives_rows_of_hand_written_sections_without_their_trajectorie
     rows = pq.read_table(doc.parent / "eval_rows.parquet").to_pylist()
     assert [(r["run"], r["env"]) for r in rows] == [("cube-yaw-s9", "cube-single")]
     assert "plan_cubes" not in rows[0] and "traj_cubes" not in rows[0] and rows[0]["goal_cubes"] == [1.0, 2.0, 3.0]
+
+
+def test_report_marks_maze_lines_whose_weights_were_replaced(tmp_path):
+    """jobs/report.py gives the maze table today's checkpoint digests: a line of run ``main`` made on weights
+    that were replaced at the same path says "older weights"; a line on today's weights does not."""
+    import json
+    import subprocess
+    import sys
+
+    from fmctd_dist.config import REPO_ROOT
+
+    today = json.loads((REPO_ROOT / "checkpoints/pointmaze-medium-h5/manifest.json").read_text())["digest"]
+    for digest, method in ((today, "fast-mctd"), ("0" * 16, "s-mctd")):
+        for k in (1, 2):
+            ResultStore(tmp_path / "res", "main").write(
+                {**row(k, 0, True, method=method, env="pointmaze-medium"), "config_hash": "h" * 16,
+                 "checkpoint_digest": digest, "episode_time_limit": 0.0})
+    doc = tmp_path / "docs" / "results.md"
+    doc.parent.mkdir()
+    doc.write_text("# Results\n<!-- report:maze -->\n<!-- /report:maze -->\n")
+    out = subprocess.run([sys.executable, "jobs/report.py", f"results={tmp_path / 'res'}", f"doc={doc}",
+                          f"figures={tmp_path / 'fig'}"], cwd=REPO_ROOT, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    text = doc.read_text()
+    assert "| fast-mctd | pointmaze-medium | 2 (2 x 1) |" in text
+    assert f"| s-mctd (older weights 00000000; shipped: {today[:8]}) | pointmaze-medium | 2 (2 x 1) |" in text
