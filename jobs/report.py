@@ -9,7 +9,9 @@ Reads the run ``main`` (the maze tables: every method x PointMaze / AntMaze maze
 rewrites only the blocks between ``<!-- report:NAME -->`` markers. Runs cited by hand-written
 sections (cubes, visual maze, recipe and option benches: ``ARCHIVED``) are not tabulated here but
 their rows are archived with the rest; the one exception is the robot table (block ``robot``):
-every archived cube episode whose config hash is today's default for its method and env. Also writes
+every archived cube episode whose config hash is today's default for its method and env. An episode
+re-run with another identity (retrained weights at the same path) keeps its earlier row in the archive,
+under run ``superseded/<run>@<config>-<ckpt>``, out of the tables. Also writes
 ``docs/eval_rows.parquet``: every row without its plan/trajectory arrays, so each number in the
 tables can be traced to its episodes from git alone. That file is also read back: the tables are
 its rows with each episode that ``results/`` also holds replaced by the fresh row, so a fresh
@@ -31,13 +33,13 @@ from fmctd_dist.evaluation.identity import config_hash
 from fmctd_dist.evaluation.plots import plot_ablation, plot_episode, plot_success_vs_time
 from fmctd_dist.evaluation.report import ABLATIONS, ANT_ENV_ORDER, CUBE_ENV_ORDER, CUBE_METHOD_ORDER, ENV_ORDER, \
     METHOD_ORDER, ablation_summary, ablation_table, current_rows, fill_markers, load_rows, maze_table, \
-    merge_rows, row_key
+    merge_rows, row_key, superseded
 from fmctd_dist.evaluation.results import summarise
 from fmctd_dist.errors import ConfigError
 
 
 # run-name prefixes whose rows are archived in docs/eval_rows.parquet without a regenerated table
-ARCHIVED = ("cube-", "visual-", "pool", "recipe-", "s10-", "campaign-")
+ARCHIVED = ("cube-", "visual-", "pool", "recipe-", "s10-", "campaign-", "superseded/")
 # per-step arrays left out of the archive (git keeps the scalars; results/ keeps the rest)
 TRAJECTORIES = ("plan_xy", "traj_xy", "plan_cubes", "traj_cubes", "traj_effector")
 
@@ -75,6 +77,7 @@ def main(argv: list[str]) -> int:
                           f"write rows there first with `python jobs/eval.py eval.out={root}`, or point results= "
                           "at the eval.out dir of an earlier evaluation")
     fresh = load_rows(root) if root.is_dir() else []
+    committed += superseded(committed, fresh)  # re-run episodes keep their earlier rows, under their own run
     sections: dict[str, str] = {}
     all_rows = []
 

@@ -206,3 +206,16 @@ def test_report_marks_maze_lines_whose_weights_were_replaced(tmp_path):
     text = doc.read_text()
     assert "| fast-mctd | pointmaze-medium | 2 (2 x 1) |" in text
     assert f"| s-mctd (older weights 00000000; shipped: {today[:8]}) | pointmaze-medium | 2 (2 x 1) |" in text
+
+
+def test_an_episode_rerun_on_new_weights_keeps_its_earlier_row_under_a_superseded_run():
+    from fmctd_dist.evaluation.report import superseded
+
+    old = [{**row(k, 0, False), "run": "main", "config_hash": "c" * 16, "checkpoint_digest": "a" * 16} for k in (1, 2)]
+    new = [{**row(1, 0, True), "run": "main", "config_hash": "c" * 16, "checkpoint_digest": "b" * 16},
+           {**row(2, 0, False), "run": "main", "config_hash": "c" * 16, "checkpoint_digest": "a" * 16}]  # same identity
+    kept = superseded(old, new)
+    assert [(r["run"], r["task"], r["success"]) for r in kept] == [("superseded/main@cccccccc-aaaaaaaa", 1, False)]
+    merged = merge_rows(old + kept, new, "main")  # the table's run holds today's rows only
+    assert [(r["task"], r["checkpoint_digest"][0]) for r in merged] == [(1, "b"), (2, "a")]
+    assert superseded(old + kept, new) == kept  # a second report adds nothing

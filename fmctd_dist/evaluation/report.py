@@ -89,6 +89,23 @@ def merge_rows(committed: list[dict[str, Any]], fresh: list[dict[str, Any]], pre
     return [merged[k] for k in sorted(merged)]
 
 
+def superseded(committed: list[dict[str, Any]], fresh: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The committed rows that a fresh row of the same episode replaces with another identity (new weights
+    at the same path, another config or time limit), renamed to run ``superseded/<run>@<config>-<ckpt>``.
+
+    A table re-run on retrained checkpoints writes to the same row files, so without this the archive
+    (``docs/eval_rows.parquet``) would silently drop the episodes earlier text quotes. Kept under their own
+    run name, they leave the re-run table (which shows today's rows only) and stay traceable.
+    """
+    fresh_ids = {row_key(r): row_identity(r) for r in fresh}
+    out = []
+    for r in committed:
+        if row_key(r) in fresh_ids and fresh_ids[row_key(r)] != row_identity(r):
+            tag = f"{str(r.get('config_hash'))[:8]}-{str(r.get('checkpoint_digest'))[:8]}"
+            out.append({**r, "run": f"superseded/{r['run']}@{tag}"})
+    return out
+
+
 def _pm(mean: float, std: float, fmt: str = ".0f") -> str:
     return f"{mean:{fmt}} ± {std:{fmt}}"
 
