@@ -12,7 +12,8 @@ the time / fast-mctd column is the option's speed-up and the success column what
 
 With ``store=<run>`` every episode is also written as a result row to ``<eval.out>/<run>/``
 (the same rows jobs/eval.py writes with ``runner=local``), so the maze table can use them; a method
-with options (below) writes to ``<eval.out>/<run>+<options>/`` (e.g. ``main+compiled``).
+with options (below) writes to ``<eval.out>/<run>+<options>/`` (e.g. ``main+compiled``). The same
+command run again resumes: episodes the store holds are read back, not re-run.
 
 For each method (default: mctd, p-mctd, s-mctd, fast-mctd, diffuser) every episode is run in this
 process with a LocalDenoiser on that method's checkpoint, interleaved per episode so load
@@ -77,6 +78,13 @@ def main(argv: list[str]) -> int:
     stores = {m: ResultStore(cfg0.eval.out, store + m[len(m.partition("+")[0]):]) for m in methods} if store else {}
     for m, st in stores.items():  # refuse a store holding rows of another config or checkpoint, before any episode
         missing(setups[m][2], st)
+    # a killed run resumes: an episode whose row the store already holds (same identity, checked above) is read
+    # back instead of planned again, so only the missing ones run
+    stored = {m: {(int(r["task"]), int(r["seed"])): r for r in st.rows(setups[m][0].method.name, setups[m][0].env.name)}
+              for m, st in stores.items()}
+    n_stored = sum((t, s) in stored.get(m, {}) for m in methods for t in cfg0.eval.tasks for s in cfg0.eval.seeds)
+    if n_stored:
+        print(f"resuming: {n_stored} episode(s) read back from store={store}, not run again", flush=True)
     set_threads(cfg0.eval.threads)
     episodes = {}  # per method: the family's env + controller (a method may set env.* or its policy)
     for m, (cfg, _, prepared) in setups.items():
@@ -92,6 +100,9 @@ def main(argv: list[str]) -> int:
     for task in cfg0.eval.tasks:
         for seed in cfg0.eval.seeds:
             for m, (cfg, planner, prepared) in setups.items():
+                if (task, seed) in stored.get(m, {}):
+                    rows[m].append(stored[m][(task, seed)])
+                    continue
                 row = episodes[m].run(planner, task, seed)
                 rows[m].append(row)
                 if store:

@@ -145,6 +145,15 @@ def test_bench_speed_runs_inference_options_side_by_side(tiny_checkpoint, tmp_pa
     # one config per (run, method, env): the option arm's row lives in run "opt+bf16", not over the fp32 one
     plain, bf16 = ResultStore(tmp_path, "opt").rows("p-mctd"), ResultStore(tmp_path, "opt+bf16").rows("p-mctd")
     assert [r["precision"] for r in plain] == ["fp32"] and [r["precision"] for r in bf16] == ["bf16"]
+    # the same command again resumes: every episode is read back from the store, none planned again
+    again = subprocess.run([sys.executable, "jobs/bench_speed.py", "methods=[p-mctd,p-mctd+bf16]", *common,
+                            f"eval.out={tmp_path}", "store=opt"], cwd=REPO_ROOT, capture_output=True, text=True,
+                           timeout=600)
+    assert again.returncode == 0, again.stderr
+    assert "resuming: 2 episode(s) read back from store=opt" in again.stdout
+    assert ResultStore(tmp_path, "opt").rows("p-mctd")[0]["plan_time_s"] == plain[0]["plan_time_s"]
+    assert [ln for ln in again.stdout.splitlines() if ln.startswith("| p-mctd |")] == \
+        [ln for ln in out.stdout.splitlines() if ln.startswith("| p-mctd |")]
     bad = subprocess.run([sys.executable, "jobs/bench_speed.py", "methods=[p-mctd+fp16]", *common],
                          cwd=REPO_ROOT, capture_output=True, text=True, timeout=600)
     assert bad.returncode == 2 and "fp16" in bad.stderr and "bf16+compiled" in bad.stderr
