@@ -97,11 +97,12 @@ def main(argv: list[str]) -> int:
             if rs:
                 plot_episode(rs[0], maze_geometry(env), figures / f"plan_{env}.png")
 
+    every_shipped = {json.loads(m.read_text()).get("digest") for m in (REPO_ROOT / "checkpoints").glob("*/manifest.json")}
     for ab in ABLATIONS:
         rows = merge_rows(committed, fresh, ab.name)
         all_rows += rows
         if rows:
-            sections[ab.name] = ablation_table(ab, rows)
+            sections[ab.name] = ablation_table(ab, rows, every_shipped)
             if ab.knob in ("parallel", "jump"):
                 plot_ablation(ablation_summary(rows, ab.knob), ab.knob, figures / f"{ab.name}.png")
 

@@ -219,3 +219,13 @@ def test_an_episode_rerun_on_new_weights_keeps_its_earlier_row_under_a_supersede
     merged = merge_rows(old + kept, new, "main")  # the table's run holds today's rows only
     assert [(r["task"], r["checkpoint_digest"][0]) for r in merged] == [(1, "b"), (2, "a")]
     assert superseded(old + kept, new) == kept  # a second report adds nothing
+
+
+def test_ablation_lines_on_weights_no_longer_shipped_say_so():
+    rows = [row(k, 0, True, parallel=v, checkpoint_digest=d, config_hash="c" * 16, episode_time_limit=0.0)
+            for v, d in ((10, "a" * 16), (200, "b" * 16)) for k in (1, 2)]
+    ab = next(a for a in ABLATIONS if a.knob == "parallel")
+    table = ablation_table(ab, rows, shipped={"b" * 16})
+    assert "| 10 | fast-mctd / giant (older weights aaaaaaaa) | 2 (2 x 1) |" in table
+    assert "| 200 | fast-mctd / giant | 2 (2 x 1) |" in table
+    assert "older weights" not in ablation_table(ab, rows)  # nothing known about what is shipped

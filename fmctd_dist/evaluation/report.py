@@ -213,7 +213,9 @@ def ablation_summary(rows: list[dict[str, Any]], knob: str) -> list[dict[str, An
     return out
 
 
-def ablation_table(ab: Ablation, rows: list[dict[str, Any]]) -> str:
+def ablation_table(ab: Ablation, rows: list[dict[str, Any]], shipped: set[str] | None = None) -> str:
+    """``shipped``: the digest of every checkpoint shipped today; a line whose weights are none of them
+    (replaced since: an ablation's checkpoint depends on its knob, e.g. one per jump) says "older weights"."""
     summary = ablation_summary(rows, ab.knob)
     refs = {s["env"]: s for s in summary if s["value"] == ab.default and type(s["value"]) is type(ab.default)}
     lines = [f"| {ab.knob} | method / env | episodes (tasks x seeds) | success (%) | planning time (s) | "
@@ -225,7 +227,8 @@ def ablation_table(ab: Ablation, rows: list[dict[str, Any]]) -> str:
         timed_out = f" ({s['timed_out']} timed out)" if s["timed_out"] else ""
         lines.append(
             f"| {s['value']} | {','.join(s['method'])} / {s['env'].replace('pointmaze-', '')}"
-            f"{f' [{v}]' if (v := s.get('variant')) else ''} | "
+            f"{f' [{v}]' if (v := s.get('variant')) else ''}"
+            f"{f' (older weights {str(d)[:8]})' if shipped is not None and (d := s.get('checkpoint_digest')) not in shipped else ''} | "
             f"{s['episodes']} ({len(s['per_task'])} x {s['seeds']}) | {_pm(s['success'], s['success_std'])}{timed_out} | "
             f"{_pm(s['plan_time_s'], s['plan_time_std'], '.2f')} | {ratio} | {s['expansions']:.0f} | "
             f"{s['iterations']:.1f} | {_shares(s)} | {ab.paper.get(s['value'], '–')} |")
