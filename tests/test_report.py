@@ -157,26 +157,32 @@ def test_robot_table_marks_lines_on_weights_that_are_no_longer_shipped():
     assert maze_table(cur, CUBE_ENV_ORDER, CUBE_METHOD_ORDER, dropped).count("older weights") == 0  # none known
 
 
-def test_report_archives_rows_of_hand_written_sections_without_their_trajectories(tmp_path):
-    """jobs/report.py keeps the rows of runs cited by hand-written sections (cube, visual, benches) in
-    eval_rows.parquet, scalars only, beside the tabulated runs; uncited runs stay out."""
+def run_report(tmp_path, doc_text: str):
+    """jobs/report.py on the rows under ``tmp_path/res``, into a fresh doc holding ``doc_text``; returns the doc."""
     import subprocess
     import sys
 
-    import pyarrow.parquet as pq
-
     from fmctd_dist.config import REPO_ROOT
+
+    doc = tmp_path / "docs" / "results.md"
+    doc.parent.mkdir()
+    doc.write_text(doc_text)
+    out = subprocess.run([sys.executable, "jobs/report.py", f"results={tmp_path / 'res'}", f"doc={doc}",
+                          f"figures={tmp_path / 'fig'}"], cwd=REPO_ROOT, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    return doc
+
+
+def test_report_archives_rows_of_hand_written_sections_without_their_trajectories(tmp_path):
+    """jobs/report.py keeps the rows of runs cited by hand-written sections (cube, visual, benches) in
+    eval_rows.parquet, scalars only, beside the tabulated runs; uncited runs stay out."""
+    import pyarrow.parquet as pq
 
     cube = {**row(1, 0, True, method="fast-mctd-replan", env="cube-single"), "plan_cubes": [0.1, 0.2],
             "traj_cubes": [0.3], "goal_cubes": [1.0, 2.0, 3.0]}
     ResultStore(tmp_path / "res", "cube-yaw-s9").write(cube)
     ResultStore(tmp_path / "res", "scratch").write(row(2, 0, False))
-    doc = tmp_path / "docs" / "results.md"
-    doc.parent.mkdir()
-    doc.write_text("# Results\n")
-    out = subprocess.run([sys.executable, "jobs/report.py", f"results={tmp_path / 'res'}", f"doc={doc}",
-                          f"figures={tmp_path / 'fig'}"], cwd=REPO_ROOT, capture_output=True, text=True, timeout=300)
-    assert out.returncode == 0, out.stderr
+    doc = run_report(tmp_path, "# Results\n")
     rows = pq.read_table(doc.parent / "eval_rows.parquet").to_pylist()
     assert [(r["run"], r["env"]) for r in rows] == [("cube-yaw-s9", "cube-single")]
     assert "plan_cubes" not in rows[0] and "traj_cubes" not in rows[0] and rows[0]["goal_cubes"] == [1.0, 2.0, 3.0]
@@ -186,8 +192,6 @@ def test_report_marks_maze_lines_whose_weights_were_replaced(tmp_path):
     """jobs/report.py gives the maze table today's checkpoint digests: a line of run ``main`` made on weights
     that were replaced at the same path says "older weights"; a line on today's weights does not."""
     import json
-    import subprocess
-    import sys
 
     from fmctd_dist.config import REPO_ROOT
 
@@ -197,13 +201,7 @@ def test_report_marks_maze_lines_whose_weights_were_replaced(tmp_path):
             ResultStore(tmp_path / "res", "main").write(
                 {**row(k, 0, True, method=method, env="pointmaze-medium"), "config_hash": "h" * 16,
                  "checkpoint_digest": digest, "episode_time_limit": 0.0})
-    doc = tmp_path / "docs" / "results.md"
-    doc.parent.mkdir()
-    doc.write_text("# Results\n<!-- report:maze -->\n<!-- /report:maze -->\n")
-    out = subprocess.run([sys.executable, "jobs/report.py", f"results={tmp_path / 'res'}", f"doc={doc}",
-                          f"figures={tmp_path / 'fig'}"], cwd=REPO_ROOT, capture_output=True, text=True, timeout=300)
-    assert out.returncode == 0, out.stderr
-    text = doc.read_text()
+    text = run_report(tmp_path, "# Results\n<!-- report:maze -->\n<!-- /report:maze -->\n").read_text()
     assert "| fast-mctd | pointmaze-medium | 2 (2 x 1) |" in text
     assert f"| s-mctd (older weights 00000000; shipped: {today[:8]}) | pointmaze-medium | 2 (2 x 1) |" in text
 
