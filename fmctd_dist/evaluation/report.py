@@ -225,10 +225,11 @@ def ablation_table(ab: Ablation, rows: list[dict[str, Any]], shipped: set[str] |
         ref = refs.get(s["env"])
         ratio = f"{s['plan_time_s'] / ref['plan_time_s']:.2f}x" if ref else "–"
         timed_out = f" ({s['timed_out']} timed out)" if s["timed_out"] else ""
+        variant = f" [{s['variant']}]" if s.get("variant") else ""
+        digest = s.get("checkpoint_digest")
+        older = f" (older weights {str(digest)[:8]})" if shipped is not None and digest not in shipped else ""
         lines.append(
-            f"| {s['value']} | {','.join(s['method'])} / {s['env'].replace('pointmaze-', '')}"
-            f"{f' [{v}]' if (v := s.get('variant')) else ''}"
-            f"{f' (older weights {str(d)[:8]})' if shipped is not None and (d := s.get('checkpoint_digest')) not in shipped else ''} | "
+            f"| {s['value']} | {','.join(s['method'])} / {s['env'].replace('pointmaze-', '')}{variant}{older} | "
             f"{s['episodes']} ({len(s['per_task'])} x {s['seeds']}) | {_pm(s['success'], s['success_std'])}{timed_out} | "
             f"{_pm(s['plan_time_s'], s['plan_time_std'], '.2f')} | {ratio} | {s['expansions']:.0f} | "
             f"{s['iterations']:.1f} | {_shares(s)} | {ab.paper.get(s['value'], '–')} |")
