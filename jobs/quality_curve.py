@@ -18,7 +18,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from fmctd_dist.diffusion.checkpoint import read_manifest
+from fmctd_dist.diffusion.checkpoint import lineage, read_manifest
 from fmctd_dist.diffusion.train import SNAPSHOTS
 from fmctd_dist.families import family
 
@@ -61,21 +61,32 @@ def measure(ckpt: Path) -> dict[str, Any]:
 def points(run: Path) -> list[tuple[str, dict[str, Any]]]:
     snaps = sorted((p for p in (run / SNAPSHOTS).glob("k*-step*") if (p / "manifest.json").exists()),
                    key=lambda p: int(p.name.rsplit("-step", 1)[1]))
-    out = [(p.name, measure(p)) for p in snaps]
+    out = [(p.name, with_lineage(p, measure(p))) for p in snaps]
     if (run / "manifest.json").exists():
         latest = read_manifest(run)["digest"]
         if all(r["digest"] != latest for _, r in out):
-            out.append(("latest", measure(run)))
+            out.append(("latest", with_lineage(run, measure(run))))
     return out
+
+
+def with_lineage(ckpt: Path, row: dict[str, Any]) -> dict[str, Any]:
+    """The row plus the training behind the weights through every train.init_from ancestor
+    (read from the manifest each time, so rows cached before the field existed get it too)."""
+    total = lineage(read_manifest(ckpt))
+    return {**row, "total_steps": total["lineage_steps"],
+            "total_cpu_h": None if total["lineage_cpu_s"] is None else total["lineage_cpu_s"] / 3600}
 
 
 def table(run: Path, rows: list[tuple[str, dict[str, Any]]]) -> str:
     pct = lambda v: "-" if v is None else f"{100 * v:.0f}%"  # noqa: E731
     num = lambda v: "-" if v is None else f"{v:.4g}"  # noqa: E731
-    lines = [f"{run}:", "| snapshot | steps | CPU h | val loss | unguided no warp | guided no warp | "
-             "guided boundary step | x0 error (t=19) | boundary max (t=19) |", "|---|---|---|---|---|---|---|---|---|"]
+    hours = lambda v: "?" if v is None else f"{v:.2f}"  # noqa: E731
+    lines = [f"{run}:", "| snapshot | steps (with ancestors) | CPU h (with ancestors) | val loss | unguided no warp | "
+             "guided no warp | guided boundary step | x0 error (t=19) | boundary max (t=19) |",
+             "|---|---|---|---|---|---|---|---|---|"]
     for name, r in rows:
-        lines.append(f"| {name} | {r['steps']} | {r['cpu_h']:.2f} | {num(r['val_loss'])} | {pct(r['unguided_no_warp'])} | "
+        lines.append(f"| {name} | {r['steps']} ({r.get('total_steps', r['steps'])}) | {r['cpu_h']:.2f} "
+                     f"({hours(r.get('total_cpu_h', r['cpu_h']))}) | {num(r['val_loss'])} | {pct(r['unguided_no_warp'])} | "
                      f"{pct(r.get('guided_no_warp'))} | {num(r.get('guided_boundary_step'))} | {num(r.get('x0_rms'))} | "
                      f"{num(r.get('boundary_max'))} |")
     return "\n".join(lines)
@@ -88,12 +99,14 @@ def plot(runs: dict[str, list[tuple[str, dict[str, Any]]]], out: Path) -> None:
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(6.4, 3.8))
+    # CPU hours with the train.init_from ancestors where every point knows them, else the run's own
+    total = all(r.get("total_cpu_h") is not None for rows in runs.values() for _, r in rows)
     for name, rows in runs.items():
-        h = [r["cpu_h"] for _, r in rows]
+        h = [r["total_cpu_h"] if total else r["cpu_h"] for _, r in rows]
         ax.plot(h, [100 * r["unguided_no_warp"] for _, r in rows], "o-", label=f"{name}: unguided")
         if rows and rows[0][1].get("guided_no_warp") is not None:
             ax.plot(h, [100 * r["guided_no_warp"] for _, r in rows], "s--", label=f"{name}: guided")
-    ax.set_xlabel("training CPU hours (one core)")
+    ax.set_xlabel("training CPU hours (one core)" + (", with the weights' ancestors" if total else ", this run"))
     ax.set_ylabel("warp-free plans (%)")
     ax.set_ylim(-2, 102)
     ax.grid(alpha=0.3)

@@ -141,6 +141,24 @@ def test_init_from_starts_a_new_env_and_horizon_from_another_checkpoints_weights
     assert all(torch.equal(a, b) for a, b in zip(model.state_dict().values(), source.state_dict().values()))
     assert manifest["init_from"]["digest"] == src_manifest["digest"] and manifest["init_from"]["train_steps"] == 10
     assert "started from the weights of" in manifest["vs_paper"]
+    # the training behind the weights counts the ancestor's steps and CPU time, and a grandchild counts both
+    assert manifest["lineage_steps"] == 20
+    assert manifest["lineage_cpu_s"] == pytest.approx(manifest["cpu_time_s"] + src_manifest["cpu_time_s"])
+    grand = tiny_cfg(5, "env=pointmaze-giant", f"train.init_from={dst}", "train.lr=1e-30")
+    train(grand, FakeData(n_tokens=21, digest="other-data"), tmp_path / "grand", progress=False)
+    _, g = load_checkpoint(tmp_path / "grand", grand)
+    assert g["init_from"]["lineage_steps"] == 20 and g["lineage_steps"] == 25
+    assert g["lineage_cpu_s"] == pytest.approx(g["cpu_time_s"] + manifest["lineage_cpu_s"])
+
+
+def test_lineage_of_a_manifest_from_before_the_field():
+    """Provenance written before lineage existed kept the parent's steps but not its CPU time: the steps
+    still add up, the hours say unknown (None) rather than a number too small."""
+    from fmctd_dist.diffusion.checkpoint import lineage
+
+    old_child = {"train_steps": 3654, "cpu_time_s": 2100.0, "init_from": {"digest": "9c01", "train_steps": 6000}}
+    assert lineage(old_child) == {"lineage_steps": 9654, "lineage_cpu_s": None}
+    assert lineage({"train_steps": 10, "wall_time_s": 5.0}) == {"lineage_steps": 10, "lineage_cpu_s": 5.0}
 
 
 def test_init_from_with_another_architecture_is_one_clear_error(tmp_path):

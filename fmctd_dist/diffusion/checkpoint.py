@@ -391,6 +391,22 @@ def load_checkpoint(ckpt_dir: str | Path, cfg: Config | None = None,
     return model.eval(), manifest
 
 
+def lineage(manifest: dict[str, Any]) -> dict[str, Any]:
+    """Training behind a model's weights, through every ``train.init_from`` ancestor.
+
+    Why: a continued model's ``train_steps`` and ``cpu_time_s`` count only its own run, so a
+    quality-against-hours curve would start each continuation at zero. ``lineage_cpu_s`` is None
+    where an ancestor predates this field and its CPU time is unknown (its steps are known: the
+    provenance always kept them).
+    """
+    parent = manifest.get("init_from") or {}
+    cpu = manifest.get("cpu_time_s", manifest.get("wall_time_s"))
+    parent_steps = parent.get("lineage_steps", parent.get("train_steps")) or 0
+    parent_cpu = parent.get("lineage_cpu_s") if parent else 0.0
+    return {"lineage_steps": int(manifest.get("train_steps") or 0) + int(parent_steps),
+            "lineage_cpu_s": None if cpu is None or parent_cpu is None else float(cpu) + float(parent_cpu)}
+
+
 def load_init_weights(ckpt_dir: str | Path, cfg: Config) -> tuple[dict[str, torch.Tensor], dict[str, Any]]:
     """Weights to start a run from (``train.init_from``) -> (state_dict, provenance for the manifest).
 
@@ -410,7 +426,8 @@ def load_init_weights(ckpt_dir: str | Path, cfg: Config) -> tuple[dict[str, torc
                                "point train.init_from at an intact checkpoint")
     provenance = {"path": str(ckpt_dir.relative_to(REPO_ROOT) if ckpt_dir.is_relative_to(REPO_ROOT) else ckpt_dir),
                   "digest": manifest["digest"], "env": manifest.get("config", {}).get("env", {}).get("name"),
-                  "jump": manifest.get("config", {}).get("jump"), "train_steps": manifest.get("train_steps")}
+                  "jump": manifest.get("config", {}).get("jump"), "train_steps": manifest.get("train_steps"),
+                  **lineage(manifest)}
     return state, provenance
 
 

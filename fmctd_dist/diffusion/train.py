@@ -27,8 +27,8 @@ from fmctd_dist.config import Config, git_sha, resolve_path
 from fmctd_dist.data.tokens import Normaliser
 from fmctd_dist.device import resolve_device, set_threads, warn_bf16
 from fmctd_dist.diffusion.checkpoint import (
-    check_compatible, load_checkpoint, load_init_weights, load_train_state, module_state, save_checkpoint,
-    save_train_state,
+    check_compatible, lineage, load_checkpoint, load_init_weights, load_train_state, module_state,
+    save_checkpoint, save_train_state,
 )
 from fmctd_dist.diffusion.model import DFTransformer
 from fmctd_dist.diffusion.models import build_model
@@ -295,6 +295,7 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
         fields = {**base, "ema_decay": tc.ema_decay, "config": cfg.to_dict(), "train_steps": step, "wall_time_s": wall,
                   "cpu_time_s": cpu, "vs_paper": vs_paper(cfg, step), "final_losses": summary["final_losses"],
                   "val_history": history["val"]}
+        fields.update(lineage({"train_steps": step, "cpu_time_s": cpu, "init_from": init_from}))
         save_checkpoint(out_dir, ema, fields)
         snap = snapshot_due(out_dir, tc.snapshot_every_s, budget_time(cfg, wall, cpu))
         if snap is not None:
