@@ -26,16 +26,27 @@ CACHE = "quality.json"
 
 
 def measure(ckpt: Path) -> dict[str, Any]:
-    """One curve point for a checkpoint dir (cached under its digest)."""
-    import torch
-
-    torch.set_num_threads(1)
+    """One curve point for a checkpoint dir (cached under its digest), with the training behind the
+    weights through every train.init_from ancestor (from the manifest, not the cache, so rows cached
+    before that field existed get it too)."""
     manifest = read_manifest(ckpt)
+    total = lineage(manifest)
+    behind = {"total_steps": total["lineage_steps"],
+              "total_cpu_h": None if total["lineage_cpu_s"] is None else total["lineage_cpu_s"] / 3600}
     cache = ckpt / CACHE
     if cache.exists():
         row = json.loads(cache.read_text())
         if row.get("digest") == manifest["digest"]:
-            return row
+            return {**row, **behind}
+    return {**_measured(ckpt, manifest), **behind}
+
+
+def _measured(ckpt: Path, manifest: dict[str, Any]) -> dict[str, Any]:
+    """The plan-level numbers of one checkpoint, written to its cache."""
+    import torch
+
+    torch.set_num_threads(1)
+    cache = ckpt / CACHE
     env = manifest["config"]["env"]["name"]
     row: dict[str, Any] = {"digest": manifest["digest"], "steps": manifest["train_steps"], "env": env,
                            "cpu_h": manifest.get("cpu_time_s", manifest["wall_time_s"]) / 3600,
@@ -61,20 +72,12 @@ def measure(ckpt: Path) -> dict[str, Any]:
 def points(run: Path) -> list[tuple[str, dict[str, Any]]]:
     snaps = sorted((p for p in (run / SNAPSHOTS).glob("k*-step*") if (p / "manifest.json").exists()),
                    key=lambda p: int(p.name.rsplit("-step", 1)[1]))
-    out = [(p.name, with_lineage(p, measure(p))) for p in snaps]
+    out = [(p.name, measure(p)) for p in snaps]
     if (run / "manifest.json").exists():
         latest = read_manifest(run)["digest"]
         if all(r["digest"] != latest for _, r in out):
-            out.append(("latest", with_lineage(run, measure(run))))
+            out.append(("latest", measure(run)))
     return out
-
-
-def with_lineage(ckpt: Path, row: dict[str, Any]) -> dict[str, Any]:
-    """The row plus the training behind the weights through every train.init_from ancestor
-    (read from the manifest each time, so rows cached before the field existed get it too)."""
-    total = lineage(read_manifest(ckpt))
-    return {**row, "total_steps": total["lineage_steps"],
-            "total_cpu_h": None if total["lineage_cpu_s"] is None else total["lineage_cpu_s"] / 3600}
 
 
 def table(run: Path, rows: list[tuple[str, dict[str, Any]]]) -> str:
@@ -85,8 +88,7 @@ def table(run: Path, rows: list[tuple[str, dict[str, Any]]]) -> str:
              "guided no warp | guided boundary step | x0 error (t=19) | boundary max (t=19) |",
              "|---|---|---|---|---|---|---|---|---|"]
     for name, r in rows:
-        lines.append(f"| {name} | {r['steps']} ({r.get('total_steps', r['steps'])}) | {r['cpu_h']:.2f} "
-                     f"({hours(r.get('total_cpu_h', r['cpu_h']))}) | {num(r['val_loss'])} | {pct(r['unguided_no_warp'])} | "
+        lines.append(f"| {name} | {r['steps']} ({r['total_steps']}) | {r['cpu_h']:.2f} ({hours(r['total_cpu_h'])}) | {num(r['val_loss'])} | {pct(r['unguided_no_warp'])} | "
                      f"{pct(r.get('guided_no_warp'))} | {num(r.get('guided_boundary_step'))} | {num(r.get('x0_rms'))} | "
                      f"{num(r.get('boundary_max'))} |")
     return "\n".join(lines)
