@@ -253,6 +253,13 @@ class TrainConfig:
     # conditional mean still minimises it, so it re-weights toward tokens' relative offsets without
     # changing the optimum. 0 = off (the paper's).
     boundary_weight: float = spec(0.0, ge=0, why="weight of the token-boundary step loss (0 = off, the paper's)")
+    # Recipe lever against the plans' first-step jump (results §4, session 21): the sampler always feeds
+    # the context token clean (timestep diffusion.stabilization - 1, scaled, no noise), but the paper's
+    # training noises it at a random timestep (half the time in [0, 250), else anywhere), so that exact
+    # input is rare in training. With probability clean_context a window's context is fed exactly as the
+    # sampler feeds it. 0 = off (the paper's).
+    clean_context: float = spec(0.0, ge=0, le=1, why="share of training windows whose context token is fed as the "
+                                                     "sampler feeds it (0 = off, the paper's)")
     # constant (paper): warm-up then train.lr; cosine: warm-up then cosine decay to 0 at the run's end
     # (train.max_steps, or train.time_budget_s of recorded wall time if that comes first); wsd
     # (warm-up, stable, decay): constant, then linear to 0 over the last train.decay_steps steps before

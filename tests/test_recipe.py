@@ -28,12 +28,15 @@ LEVERS = {"model.param=v": ("model", "param"), "model.param=v_offset": ("model",
           "train.lr_schedule=wsd": ("train", "lr_schedule"),
           "train.precision=bf16": ("train", "precision"),
           "diffusion.guidance_path=network": ("diffusion", "guidance_path"),
-          "train.boundary_weight=2.0": ("train", "boundary_weight")}
+          "train.boundary_weight=2.0": ("train", "boundary_weight"),
+          "train.clean_context=0.5": ("train", "clean_context")}
 MODEL_LEVERS = ("model.param=v", "model.param=v_offset", "model.norm=pre")
-RECIPE_FIELDS = {"model": ("param", "norm"), "train": ("lr_schedule", "precision", "time_budget_s", "boundary_weight"),
+RECIPE_FIELDS = {"model": ("param", "norm"), "train": ("lr_schedule", "precision", "time_budget_s", "boundary_weight",
+                                                      "clean_context"),
                  "diffusion": ("guidance_path",)}
 PAPER = {"model": {"param": "x0", "norm": "post"}, "train": {"lr_schedule": "constant", "precision": "fp32",
-                                                              "time_budget_s": 0.0, "boundary_weight": 0.0},
+                                                              "time_budget_s": 0.0, "boundary_weight": 0.0,
+                                                              "clean_context": 0.0},
          "diffusion": {"guidance_path": "input"}}
 
 
@@ -263,3 +266,32 @@ def test_validation_loss_leaves_the_boundary_term_out_so_arms_compare():
     gen = lambda: torch.Generator().manual_seed(1)  # noqa: E731
     with torch.no_grad():  # training sees the term
         assert float(with_bw(model, batches[0], gen())) > float(plain(model, batches[0], gen()))
+
+
+class _Spy(torch.nn.Module):
+    """Records the network's inputs; predicts zeros."""
+
+    def forward(self, xt: torch.Tensor, k: torch.Tensor) -> torch.Tensor:
+        self.seen = (xt.clone(), k.clone())
+        return torch.zeros_like(xt)
+
+
+def test_clean_context_feeds_the_context_as_the_sampler_does_and_is_off_by_default():
+    x0 = torch.as_tensor(FakeData().windows[:6])
+    dev = torch.device("cpu")
+    gen = lambda: torch.Generator().manual_seed(3)  # noqa: E731
+    spy = _Spy()
+    cfg_on = tiny_cfg(1, "train.clean_context=1.0")
+    DFLoss(cfg_on, dev)(spy, x0, gen())
+    xt, k = spy.seen
+    sampler = make_consts(cfg_on.diffusion)  # what the sampler feeds a level-0 token
+    assert (k[:, 0] == sampler.t_in[0]).all()
+    assert torch.allclose(xt[:, 0], sampler.sqrt_ab_in[0] * x0[:, 0], rtol=0, atol=1e-6)  # scaled, no noise
+    # every other token is noised exactly as without the lever; off, the context is noised as the paper's
+    DFLoss(tiny_cfg(1), dev)(spy, x0, gen())
+    xt_off, k_off = spy.seen
+    assert torch.equal(xt_off[:, 1:], xt[:, 1:]) and torch.equal(k_off[:, 1:], k[:, 1:])
+    assert not torch.equal(xt_off[:, 0], xt[:, 0])
+    # validation: the paper's loss whatever the lever says, so arms compare
+    DFLoss(cfg_on, dev)(spy, x0, gen(), validation=True)
+    assert torch.equal(spy.seen[0], xt_off) and torch.equal(spy.seen[1], k_off)

@@ -7,8 +7,9 @@ continues from the last save with optimiser and RNG states restored, so a killed
 an uninterrupted one produce the same weights (bitwise on CPU). ``train.time_budget_s`` stops
 a run once its recorded wall time (or, ``train.budget_clock=cpu``, its CPU time) reaches the budget
 (recipe arms at equal compute); the recipe levers ``train.lr_schedule``, ``train.precision``
-(bf16 autocast of the training step) and ``train.boundary_weight`` (a loss on the steps across
-token boundaries) default to the paper's constant LR, fp32 and plain token loss.
+(bf16 autocast of the training step), ``train.boundary_weight`` (a loss on the steps across
+token boundaries) and ``train.clean_context`` (the context token fed as the sampler feeds it) default
+to the paper's constant LR, fp32, plain token loss and noised context.
 """
 
 from __future__ import annotations
@@ -43,7 +44,7 @@ LOG_EVERY = 10  # steps between progress-bar updates (each one syncs the device)
 PAPER_TRAINING = {"df": {"layers": 12, "batch_size": 1024, "steps": 200_005},
                   "diffuser": {"batch_size": 32, "steps": 20_000, "unet_channels": [32, 128, 256]}}
 PAPER_RECIPE = {"model.param": "x0", "model.norm": "post", "train.lr_schedule": "constant", "train.precision": "fp32",
-                "train.boundary_weight": 0.0}
+                "train.boundary_weight": 0.0, "train.clean_context": 0.0}
 
 
 class TrainDataLike(Protocol):
@@ -74,13 +75,15 @@ class DFLoss(torch.nn.Module):
         self.clip_noise = cfg.diffusion.clip_noise
         self.frame_stack = cfg.model.frame_stack
         self.boundary_weight = cfg.train.boundary_weight
+        self.clean_context = cfg.train.clean_context
+        self.context_t = dc.stabilization - 1  # the sampler's level-0 timestep (reference.md §5)
 
     def forward(self, model: DFTransformer, x0: torch.Tensor, gen: torch.Generator,
-                boundary: bool = True) -> torch.Tensor:
+                validation: bool = False) -> torch.Tensor:
         """x0: [B, T, D] clean normalised tokens -> scalar loss; all randomness from ``gen``.
 
-        ``boundary=False`` leaves out the train.boundary_weight term: the validation loss is the
-        token loss alone, so it compares between recipe arms.
+        ``validation=True`` is the paper's loss alone (no train.boundary_weight term, no
+        train.clean_context feeding), so validation losses compare between recipe arms.
         """
         b, t, _ = x0.shape
         dev = x0.device
@@ -93,9 +96,14 @@ class DFLoss(torch.nn.Module):
         weight = torch.where(cut, MASKED_WEIGHT, 1.0) * self.w_snr[k]  # [B, T]
         noise = torch.randn(x0.shape, generator=gen, device=dev).clamp(-self.clip_noise, self.clip_noise)
         xt = self.sqrt_ab[k][..., None] * x0 + self.sqrt_1m_ab[k][..., None] * noise
+        if self.clean_context and not validation:  # drawn last: with the lever off, every other draw is as before
+            clean = torch.rand(b, generator=gen, device=dev) < self.clean_context
+            k[:, 0] = torch.where(clean, self.context_t, k[:, 0])
+            xt[:, 0] = torch.where(clean[:, None], self.sqrt_ab[self.context_t] * x0[:, 0], xt[:, 0])
+            weight[:, 0] = self.w_snr[k[:, 0]]
         pred = model(xt, k)
         loss = (weight[..., None] * (pred - x0).square()).mean()
-        if boundary and self.boundary_weight:
+        if not validation and self.boundary_weight:
             loss = loss + self.boundary_weight * boundary_loss(pred, x0, weight, self.frame_stack)
         return loss
 
@@ -218,7 +226,7 @@ def validation_loss(model: DFTransformer, loss_fn: DFLoss, batches: list[torch.T
     was_training = model.training
     model.eval()
     gen = torch.Generator(device=device).manual_seed(VAL_NOISE_SEED)
-    kw = {"boundary": False} if isinstance(loss_fn, DFLoss) else {}
+    kw = {"validation": True} if isinstance(loss_fn, DFLoss) else {}
     total = sum(float(loss_fn(model, x, gen, **kw)) for x in batches)
     model.train(was_training)
     return total / max(len(batches), 1)

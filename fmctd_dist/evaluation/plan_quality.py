@@ -6,8 +6,9 @@ jobs/bench_recipe.py (the recipe bench, issue 17):
 - :func:`plan_quality`: 100 unguided and 100 guided plans (20 per task start, the full
   schedule = plain Diffusion Forcing sampling; Diffuser: all tokens together, start
   inpainted): share without a warp (a step over 0.75 + 0.25 H), share of points in free maze
-  cells, share of guided plans within 2.0 of the goal, and the mean step across token
-  boundaries / inside tokens (a model whose error is a per-token offset jumps at boundaries).
+  cells, share of guided plans within 2.0 of the goal, the mean step across token
+  boundaries / inside tokens (a model whose error is a per-token offset jumps at boundaries),
+  and the first step (start -> first plan frame: mean, and share of plans that warp there).
 - :func:`precision`: x0 error on validation windows noised to a few timesteps, in world
   units, split into token-boundary and inside-token steps, plus the start sensitivity.
 """
@@ -89,6 +90,8 @@ def plan_quality(ckpt: Path, cfg: Config | None = None, samples_per_task: int = 
         row[f"{name}_no_warp"] = float((steps.max(1) <= warp).mean())
         row[f"{name}_in_free"] = float(geo.in_free_cell(plans).mean())
         row[f"{name}_near_goal"] = float((np.linalg.norm(plans - goals[:, None], axis=-1).min(1) < GOAL_RADIUS).mean())
+        row[f"{name}_first_step"] = float(steps[:, 0].mean())  # start -> first plan frame (the value checks it too)
+        row[f"{name}_first_warp"] = float((steps[:, 0] > warp).mean())
         row[f"{name}_boundary_step"] = float(boundary.mean())
         row[f"{name}_inside_step"] = float(inside.mean())
         row[f"{name}_s"] = time.perf_counter() - t0
