@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 import torch
@@ -159,6 +161,23 @@ def test_lineage_of_a_manifest_from_before_the_field():
     old_child = {"train_steps": 3654, "cpu_time_s": 2100.0, "init_from": {"digest": "9c01", "train_steps": 6000}}
     assert lineage(old_child) == {"lineage_steps": 9654, "lineage_cpu_s": None}
     assert lineage({"train_steps": 10, "wall_time_s": 5.0}) == {"lineage_steps": 10, "lineage_cpu_s": 5.0}
+
+
+def test_lineage_reads_an_ancestor_still_on_disk(tmp_path):
+    """A record made from an old parent (whose own ancestor it could not see) undercounts; the parent's
+    manifest, still on disk under the recorded path and digest, is read again. Other weights at that path
+    (the digest differs) are not."""
+    from fmctd_dist.diffusion.checkpoint import lineage
+
+    parent = {"digest": "p", "train_steps": 7769, "cpu_time_s": 2100.0,
+              "init_from": {"digest": "gone", "train_steps": 6000}}  # written before the lineage fields
+    (tmp_path / "parent").mkdir()
+    (tmp_path / "parent" / "manifest.json").write_text(json.dumps(parent))
+    child = {"train_steps": 1000, "cpu_time_s": 10.0,
+             "init_from": {"digest": "p", "path": str(tmp_path / "parent"), "train_steps": 7769, "lineage_steps": 7769}}
+    assert lineage(child) == {"lineage_steps": 14769, "lineage_cpu_s": None}
+    replaced = {**child, "init_from": {**child["init_from"], "digest": "other"}}
+    assert lineage(replaced) == {"lineage_steps": 8769, "lineage_cpu_s": None}
 
 
 def test_init_from_with_another_architecture_is_one_clear_error(tmp_path):

@@ -391,15 +391,21 @@ def load_checkpoint(ckpt_dir: str | Path, cfg: Config | None = None,
     return model.eval(), manifest
 
 
-def lineage(manifest: dict[str, Any]) -> dict[str, Any]:
+def lineage(manifest: dict[str, Any], _seen: frozenset[Path] = frozenset()) -> dict[str, Any]:
     """Training behind a model's weights, through every ``train.init_from`` ancestor.
 
     Why: a continued model's ``train_steps`` and ``cpu_time_s`` count only its own run, so a
     quality-against-hours curve would start each continuation at zero. ``lineage_cpu_s`` is None
     where an ancestor predates this field and its CPU time is unknown (its steps are known: the
-    provenance always kept them).
+    provenance always kept them). An ancestor still on disk under its recorded path and digest is
+    read again, so a record written before this field (or from such a record) cannot undercount.
     """
     parent = manifest.get("init_from") or {}
+    on_disk = resolve_path(parent["path"]) / MANIFEST_FILE if parent.get("path") else None
+    if on_disk is not None and on_disk not in _seen and on_disk.is_file():
+        ancestor = json.loads(on_disk.read_text())
+        if ancestor.get("digest") == parent.get("digest"):  # the same weights: their own record is the truth
+            parent = {**parent, **lineage(ancestor, _seen | {on_disk})}
     cpu = manifest.get("cpu_time_s", manifest.get("wall_time_s"))
     parent_steps = parent.get("lineage_steps", parent.get("train_steps")) or 0
     parent_cpu = parent.get("lineage_cpu_s") if parent else 0.0
