@@ -12,7 +12,8 @@ Quality, per checkpoint: validation loss (manifest), then 100 unguided and 100 g
 (20 per task start, full pyramid schedule = plain Diffusion Forcing sampling; Diffuser
 checkpoints: all tokens denoised together, start inpainted): share of plans
 without a warp (a step over 0.75 + 0.25 H: the authors' 1.0 dense, 2.0 at H=5), share of plan points inside free
-maze cells, share of guided plans that come within 2.0 of the goal. These say whether a
+maze cells, share of plans "valid" (no warp, and no step crosses a wall: the value's warp test
+sees only the first), share of guided plans that come within 2.0 of the goal. These say whether a
 search has anything to work with (the measurements live in fmctd_dist.evaluation.plan_quality,
 shared with jobs/bench_recipe.py). Cube models get their own table
 (fmctd_dist.evaluation.cube_quality: unguided plans from 100 validation starts beside the data's
@@ -255,14 +256,14 @@ def main(argv: list[str]) -> None:
     if cubes:
         print("\n".join(cube_lines(cubes)) + "\n")
     print(f"{5 * per_task} unguided and {5 * per_task} guided plans per checkpoint (same noise for every checkpoint)")
-    print("| checkpoint | steps | params | val loss | train h | unguided: no warp / in free cells | "
-          "guided: no warp / in free cells / within 2.0 of goal | guided boundary / inside step |")
+    print("| checkpoint | steps | params | val loss | train h | unguided: no warp / in free cells / valid | "
+          "guided: no warp / in free cells / valid / within 2.0 of goal | guided boundary / inside step |")
     print("|---|---|---|---|---|---|---|---|")
     for ckpt in ckpts:
         r = plan_quality(ckpt, samples_per_task=per_task)
         print(f"| {r['checkpoint']} | {r['steps']} | {r['params']:,} | {r['val_loss'] if r['val_loss'] is None else round(r['val_loss'], 4)} | {r['train_h']:.2f} | "
-              f"{100 * r['unguided_no_warp']:.0f}% / {100 * r['unguided_in_free']:.1f}% | "
-              f"{100 * r['guided_no_warp']:.0f}% / {100 * r['guided_in_free']:.1f}% / "
+              f"{100 * r['unguided_no_warp']:.0f}% / {100 * r['unguided_in_free']:.1f}% / {100 * r['unguided_valid']:.0f}% | "
+              f"{100 * r['guided_no_warp']:.0f}% / {100 * r['guided_in_free']:.1f}% / {100 * r['guided_valid']:.0f}% / "
               f"{100 * r['guided_near_goal']:.0f}% | {r['guided_boundary_step']:.2f} / {r['guided_inside_step']:.2f} |")
 
 

@@ -4,10 +4,11 @@
 
 Measures every snapshot a run kept (``train.snapshot_every_s``, under <run>/snapshots/) and the
 run itself with the plan-level numbers of the denoiser-quality table (maze models: unguided and
-guided warp-free share, guided boundary step, x0 error at the last level; cube models: the cube
-row), prints one markdown table, row per snapshot, and draws warp-free share against CPU hours.
+guided warp-free share, guided valid share (warp-free and crossing no wall), guided boundary
+step, x0 error at the last level; cube models: the cube row), prints one markdown table, row per
+snapshot, and draws warp-free share against CPU hours.
 Each measurement is cached in <snapshot>/quality.json under the checkpoint's digest, so a rerun
-measures only new snapshots (and maze rows cached before the first-step fields existed).
+measures only new snapshots (and maze rows cached before the valid-plan fields existed).
 """
 
 from __future__ import annotations
@@ -36,7 +37,7 @@ def measure(ckpt: Path) -> dict[str, Any]:
     cache = ckpt / CACHE
     if cache.exists():
         row = json.loads(cache.read_text())
-        if row.get("digest") == manifest["digest"] and (family(row["env"]) == "cube" or "guided_first_warp" in row):
+        if row.get("digest") == manifest["digest"] and (family(row["env"]) == "cube" or "guided_valid" in row):
             return {**row, **behind}
     return {**_measured(ckpt, manifest), **behind}
 
@@ -64,6 +65,7 @@ def _measured(ckpt: Path, manifest: dict[str, Any]) -> dict[str, Any]:
         row.update(unguided_no_warp=q["unguided_no_warp"], guided_no_warp=q["guided_no_warp"],
                    guided_boundary_step=q["guided_boundary_step"], guided_in_free=q["guided_in_free"],
                    guided_first_step=q["guided_first_step"], guided_first_warp=q["guided_first_warp"],
+                   unguided_valid=q["unguided_valid"], guided_valid=q["guided_valid"],
                    x0_rms=p["rows"][0]["x0_rms"], boundary_max=p["rows"][0]["boundary_max"],
                    data_boundary_mean=p["data"]["boundary_mean"])
     cache.write_text(json.dumps(row, indent=1) + "\n")
@@ -86,12 +88,12 @@ def table(run: Path, rows: list[tuple[str, dict[str, Any]]]) -> str:
     num = lambda v: "-" if v is None else f"{v:.4g}"  # noqa: E731
     hours = lambda v: "?" if v is None else f"{v:.2f}"  # noqa: E731
     lines = [f"{run}:", "| snapshot | steps (with ancestors) | CPU h (with ancestors) | val loss | unguided no warp | "
-             "guided no warp | guided: warp at the first step | guided first step | guided boundary step | "
+             "guided no warp | guided valid (no warp, no wall) | guided: warp at the first step | guided first step | guided boundary step | "
              "x0 error (t=19) | boundary max (t=19) |",
-             "|---|---|---|---|---|---|---|---|---|---|---|"]
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for name, r in rows:
         lines.append(f"| {name} | {r['steps']} ({r['total_steps']}) | {r['cpu_h']:.2f} ({hours(r['total_cpu_h'])}) | {num(r['val_loss'])} | {pct(r['unguided_no_warp'])} | "
-                     f"{pct(r.get('guided_no_warp'))} | {pct(r.get('guided_first_warp'))} | {num(r.get('guided_first_step'))} | "
+                     f"{pct(r.get('guided_no_warp'))} | {pct(r.get('guided_valid'))} | {pct(r.get('guided_first_warp'))} | {num(r.get('guided_first_step'))} | "
                      f"{num(r.get('guided_boundary_step'))} | {num(r.get('x0_rms'))} | "
                      f"{num(r.get('boundary_max'))} |")
     return "\n".join(lines)
@@ -111,6 +113,8 @@ def plot(runs: dict[str, list[tuple[str, dict[str, Any]]]], out: Path) -> None:
         ax.plot(h, [100 * r["unguided_no_warp"] for _, r in rows], "o-", label=f"{name}: unguided")
         if rows and rows[0][1].get("guided_no_warp") is not None:
             ax.plot(h, [100 * r["guided_no_warp"] for _, r in rows], "s--", label=f"{name}: guided")
+        if rows and rows[0][1].get("guided_valid") is not None:
+            ax.plot(h, [100 * r["guided_valid"] for _, r in rows], "^:", label=f"{name}: guided, no wall either")
     ax.set_xlabel("training CPU hours (one core)" + (", with the weights' ancestors" if total else ", this run"))
     ax.set_ylabel("warp-free plans (%)")
     ax.set_ylim(-2, 102)

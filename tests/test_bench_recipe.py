@@ -41,6 +41,7 @@ def test_tiny_bench_trains_evaluates_and_appends_its_table(tiny_dataset, tmp_pat
     assert v["digest"] == vnet["digest"] and not (tmp_path / "runs" / "smoke" / "vnet" / "manifest.json").exists()
     assert v["fast_mctd_episodes"] == 1 and 0 <= v["unguided_no_warp"] <= 1
     assert v["guided_first_warp"] <= 1 - v["guided_no_warp"]  # a plan that warps at its first step warps
+    assert v["guided_valid"] <= min(v["guided_no_warp"], v["guided_wall_free"])  # valid: both
     assert (tmp_path / "results" / "recipe-smoke-vnet" / "fast-mctd").is_dir()
     text = doc.read_text()
     assert text.index("old text") < text.index("### Recipe bench") < text.index("| vnet") < text.index("## 5. Next")

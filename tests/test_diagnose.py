@@ -3,6 +3,7 @@
 import numpy as np
 
 from fmctd_dist.envs import maze_geometry
+from fmctd_dist.envs.maze import densify
 from fmctd_dist.evaluation.diagnose import failures
 
 
@@ -26,3 +27,14 @@ def test_a_moving_robot_is_not_stopped_and_replans_are_counted():
     traj = np.stack([np.linspace(0, 20, 300), np.zeros(300)], axis=1)
     (f,) = failures([row([[0, 0], [0, 1]], traj, status="plan,plan,plan")])
     assert not f["stopped"] and f["status"] == "3 plans" and f["plan_in_free"] == 1.0
+
+
+def test_path_in_free_judges_whole_polylines_batched():
+    """plan_quality's "valid" share rests on this: a step between two free points across a wall fails."""
+    geo = maze_geometry("pointmaze-medium")
+    start, beyond = np.array([8.0, 16.0]), np.array([0.0, 16.0])
+    along = start + np.array([0.0, 0.5])
+    paths = np.stack([np.stack([start, along, start]), np.stack([start, along, beyond])])  # [2, 3, 2]
+    assert geo.in_free_cell(paths).all()  # every vertex is free ...
+    assert geo.path_in_free(paths).tolist() == [True, False]  # ... the second path's last step is not
+    assert densify(paths).shape == (2, 21, 2) and np.allclose(densify(paths)[:, ::10], paths)

@@ -125,6 +125,21 @@ class MazeGeometry:
         out[inside] = self.walls[i[inside], j[inside]] == 0
         return out
 
+    def path_in_free(self, path: np.ndarray, per_step: int = 10) -> np.ndarray:
+        """[..., F, 2] polylines -> [...] bool: every point along every step is in a free cell (the
+        path crosses no wall; a straight step of up to 4 units can cut a wall's corner otherwise)."""
+        return self.in_free_cell(densify(path, per_step)).all(-1)
+
+
+def densify(path: np.ndarray, per_step: int = 10) -> np.ndarray:
+    """[..., F, 2] polyline -> [..., 1 + per_step (F - 1), 2]: its first point, then ``per_step`` evenly
+    spaced points along each step (ending on every vertex). Two free points can sit on either side
+    of a wall; the points between them cannot."""
+    path = np.asarray(path, dtype=np.float64)
+    frac = np.linspace(1.0 / per_step, 1.0, per_step)[:, None]  # [k, 1]
+    seg = path[..., :-1, None, :] + frac * (path[..., 1:, None, :] - path[..., :-1, None, :])  # [..., F-1, k, 2]
+    return np.concatenate([path[..., :1, :], seg.reshape(*path.shape[:-2], -1, 2)], axis=-2)
+
 
 def check_env_name(name: str) -> str:
     """``name`` if it is a maze env; an unknown name or a cube env is one ConfigError."""

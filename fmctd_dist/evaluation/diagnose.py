@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from fmctd_dist.envs import maze_geometry
+from fmctd_dist.envs.maze import densify
 
 STILL_STEPS = 200  # a robot whose last STILL_STEPS positions span less than STILL_RANGE stopped
 STILL_RANGE = 1.0
@@ -27,8 +28,7 @@ def failures(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
         goal = np.asarray(geo.task(r["task"]).goal_xy)
         plan = np.asarray(r["plan_xy"], dtype=np.float64).reshape(-1, 2)
         traj = np.asarray(r["traj_xy"], dtype=np.float64).reshape(-1, 2)
-        frac = np.linspace(0.1, 1.0, 10)[None, :, None]  # 10 points along each plan step
-        path = np.concatenate([plan[:1], (plan[:-1, None] + frac * (plan[1:] - plan[:-1])[:, None]).reshape(-1, 2)])
+        path = densify(plan)  # 10 points along each plan step
         statuses = str(r["plan_status"]).split(",")
         tail = traj[-STILL_STEPS:]
         out.append({"task": r["task"], "seed": r["seed"], "plan_len": len(plan),

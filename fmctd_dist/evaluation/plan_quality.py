@@ -6,7 +6,9 @@ jobs/bench_recipe.py (the recipe bench, issue 17):
 - :func:`plan_quality`: 100 unguided and 100 guided plans (20 per task start, the full
   schedule = plain Diffusion Forcing sampling; Diffuser: all tokens together, start
   inpainted): share without a warp (a step over 0.75 + 0.25 H), share of points in free maze
-  cells, share of guided plans within 2.0 of the goal, the mean step across token
+  cells, share of plans whose whole path (start included, 10 points per step) crosses no
+  wall, share both warp-free and wall-free ("valid": the value's warp test sees jumps, not
+  walls), share of guided plans within 2.0 of the goal, the mean step across token
   boundaries / inside tokens (a model whose error is a per-token offset jumps at boundaries),
   and the first step (start -> first plan frame: mean, and share of plans that warp there).
 - :func:`precision`: x0 error on validation windows noised to a few timesteps, in world
@@ -85,10 +87,14 @@ def plan_quality(ckpt: Path, cfg: Config | None = None, samples_per_task: int = 
     for name, scale in (("unguided", 0.0), ("guided", cfg.method.guidance_scale)):
         t0 = time.perf_counter()
         plans = sample_plans(denoiser, cfg, codec, starts, goals, scale, seed=0)
-        steps = np.linalg.norm(np.diff(np.concatenate([starts[:, None], plans], 1), axis=1), axis=-1)
+        path = np.concatenate([starts[:, None], plans], 1)
+        steps = np.linalg.norm(np.diff(path, axis=1), axis=-1)
         boundary, inside = boundary_and_inside(steps, cfg.model.frame_stack)
-        row[f"{name}_no_warp"] = float((steps.max(1) <= warp).mean())
+        no_warp, wall_free = steps.max(1) <= warp, geo.path_in_free(path)
+        row[f"{name}_no_warp"] = float(no_warp.mean())
         row[f"{name}_in_free"] = float(geo.in_free_cell(plans).mean())
+        row[f"{name}_wall_free"] = float(wall_free.mean())
+        row[f"{name}_valid"] = float((no_warp & wall_free).mean())  # what a robot could follow
         row[f"{name}_near_goal"] = float((np.linalg.norm(plans - goals[:, None], axis=-1).min(1) < GOAL_RADIUS).mean())
         row[f"{name}_first_step"] = float(steps[:, 0].mean())  # start -> first plan frame (the value checks it too)
         row[f"{name}_first_warp"] = float((steps[:, 0] > warp).mean())
