@@ -126,7 +126,9 @@ def test_rerun_with_another_config_is_refused_listing_what_differs(tmp_path):
     with pytest.raises(ResultsError, match="checkpoint digest"):
         missing(prepared(digest="e" * 16), store)
     # opting in keeps the old rows and runs only this config's missing keys
-    assert missing(prepared("method.parallel=50", "eval.resume_mixed=true"), store) == [(2, 0)]
+    said: list[str] = []
+    assert missing(prepared("method.parallel=50", "eval.resume_mixed=true"), store, said.append) == [(2, 0)]
+    assert any("1 key(s) of this grid hold rows of another config" in s and "task 1 seed 0" in s for s in said)
 
 
 def test_rows_of_another_low_level_policy_are_refused(tmp_path):

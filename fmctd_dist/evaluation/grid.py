@@ -83,6 +83,12 @@ def missing(p: Prepared, store: ResultStore, log: Callable[[str], None] = print)
             f"eval.run=<new name>, or keep those rows and add this config's with eval.resume_mixed=true "
             "(tables list each config on its own line)")
     done = {(int(r["task"]), int(r["seed"])) for r in rows}
+    held = sorted({(int(r["task"]), int(r["seed"])) for r in foreign} & set(grid(cfg)))
+    if held:  # one row file per (task, seed): these keep the other config's row and are not re-run
+        log(f"eval.resume_mixed: {len(held)} key(s) of this grid hold rows of another config or checkpoint and are "
+            f"kept, not re-run on this one: {', '.join(f'task {t} seed {s}' for t, s in held[:10])}"
+            f"{' ...' if len(held) > 10 else ''}. To re-run them, move "
+            f"{store.root / cfg.method.name / cfg.env.name} aside or write to eval.run=<new name>")
     return [(t, s) for t, s in grid(cfg) if (t, s) not in done]
 
 
