@@ -180,6 +180,23 @@ def test_lineage_reads_an_ancestor_still_on_disk(tmp_path):
     assert lineage(replaced) == {"lineage_steps": 8769, "lineage_cpu_s": None}
 
 
+def test_lineage_finds_an_ancestor_whose_path_now_holds_other_weights(tmp_path, monkeypatch):
+    """A shipped checkpoint swapped for its continuation no longer holds the ancestor a run recorded; the
+    ancestor's manifest is found elsewhere (a run dir) by its digest."""
+    from fmctd_dist.diffusion import checkpoint
+
+    for name, record in (("shipped", {"digest": "new", "train_steps": 5}),
+                         ("moved", {"digest": "p", "train_steps": 7769, "cpu_time_s": 2100.0,
+                                    "init_from": {"digest": "root", "train_steps": 6000, "lineage_steps": 6000,
+                                                  "lineage_cpu_s": 900.0}})):
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "manifest.json").write_text(json.dumps(record))
+    monkeypatch.setattr(checkpoint, "_DIGEST_INDEX", {"p": [tmp_path / "moved" / "manifest.json"]})
+    child = {"train_steps": 1000, "cpu_time_s": 10.0,
+             "init_from": {"digest": "p", "path": str(tmp_path / "shipped"), "train_steps": 7769}}
+    assert checkpoint.lineage(child) == {"lineage_steps": 14769, "lineage_cpu_s": 3010.0}
+
+
 def test_init_from_with_another_architecture_is_one_clear_error(tmp_path):
     train(tiny_cfg(10), FakeData(), tmp_path / "src", progress=False)
     cfg = tiny_cfg(10, "model.width=64", f"train.init_from={tmp_path / 'src'}")

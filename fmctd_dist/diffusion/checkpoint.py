@@ -397,20 +397,52 @@ def lineage(manifest: dict[str, Any], _seen: frozenset[Path] = frozenset()) -> d
     Why: a continued model's ``train_steps`` and ``cpu_time_s`` count only its own run, so a
     quality-against-hours curve would start each continuation at zero. ``lineage_cpu_s`` is None
     where an ancestor predates this field and its CPU time is unknown (its steps are known: the
-    provenance always kept them). An ancestor still on disk under its recorded path and digest is
-    read again, so a record written before this field (or from such a record) cannot undercount.
+    provenance always kept them). An ancestor still on disk (under its recorded path, or any
+    checkpoint or run dir holding its digest) is read again, so a record written before this field
+    (or from such a record) cannot undercount.
     """
     parent = manifest.get("init_from") or {}
-    on_disk = resolve_path(parent["path"]) / MANIFEST_FILE if parent.get("path") else None
-    if on_disk is not None and on_disk not in _seen and on_disk.is_file():
-        ancestor = json.loads(on_disk.read_text())
-        if ancestor.get("digest") == parent.get("digest"):  # the same weights: their own record is the truth
-            parent = {**parent, **lineage(ancestor, _seen | {on_disk})}
+    on_disk = _ancestor_manifest(parent)
+    if on_disk is not None and on_disk not in _seen:  # the same weights: their own record is the truth
+        parent = {**parent, **lineage(json.loads(on_disk.read_text()), _seen | {on_disk})}
     cpu = manifest.get("cpu_time_s", manifest.get("wall_time_s"))
     parent_steps = parent.get("lineage_steps", parent.get("train_steps")) or 0
     parent_cpu = parent.get("lineage_cpu_s") if parent else 0.0
     return {"lineage_steps": int(manifest.get("train_steps") or 0) + int(parent_steps),
             "lineage_cpu_s": None if cpu is None or parent_cpu is None else float(cpu) + float(parent_cpu)}
+
+
+def _ancestor_manifest(parent: dict[str, Any]) -> Path | None:
+    """The manifest on disk of an ``init_from`` record's weights: at its recorded path if that still
+    holds its digest, else any ``checkpoints/*`` or ``runs/**`` manifest with that digest (a path
+    whose weights were replaced since, e.g. a shipped checkpoint swapped for its continuation)."""
+    digest = parent.get("digest")
+    if not digest:
+        return None
+    recorded = [resolve_path(parent["path"]) / MANIFEST_FILE] if parent.get("path") else []
+    for path in recorded + _manifests_by_digest().get(digest, []):
+        if path.is_file() and json.loads(path.read_text()).get("digest") == digest:
+            return path
+    return None
+
+
+def _manifests_by_digest() -> dict[str, list[Path]]:
+    """digest -> manifest paths under checkpoints/ and runs/ (read once per process)."""
+    global _DIGEST_INDEX
+    if _DIGEST_INDEX is None:
+        _DIGEST_INDEX = {}
+        for root, pattern in ((REPO_ROOT / "checkpoints", f"*/{MANIFEST_FILE}"), (REPO_ROOT / "runs", f"**/{MANIFEST_FILE}")):
+            for path in sorted(root.glob(pattern)) if root.is_dir() else []:
+                try:
+                    digest = json.loads(path.read_text()).get("digest")
+                except (OSError, ValueError):
+                    continue
+                if digest:
+                    _DIGEST_INDEX.setdefault(digest, []).append(path)
+    return _DIGEST_INDEX
+
+
+_DIGEST_INDEX: dict[str, list[Path]] | None = None
 
 
 def load_init_weights(ckpt_dir: str | Path, cfg: Config) -> tuple[dict[str, torch.Tensor], dict[str, Any]]:
