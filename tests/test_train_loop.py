@@ -191,7 +191,7 @@ def test_lineage_finds_an_ancestor_whose_path_now_holds_other_weights(tmp_path, 
                                                   "lineage_cpu_s": 900.0}})):
         (tmp_path / name).mkdir()
         (tmp_path / name / "manifest.json").write_text(json.dumps(record))
-    monkeypatch.setattr(checkpoint, "_DIGEST_INDEX", {"p": [tmp_path / "moved" / "manifest.json"]})
+    monkeypatch.setattr(checkpoint, "_manifests_by_digest", lambda: {"p": [tmp_path / "moved" / "manifest.json"]})
     child = {"train_steps": 1000, "cpu_time_s": 10.0,
              "init_from": {"digest": "p", "path": str(tmp_path / "shipped"), "train_steps": 7769}}
     assert checkpoint.lineage(child) == {"lineage_steps": 14769, "lineage_cpu_s": 3010.0}

@@ -15,6 +15,7 @@ import json
 import os
 import pickle
 import shlex
+from functools import lru_cache
 from pathlib import Path
 from typing import Any, Callable
 
@@ -415,34 +416,33 @@ def lineage(manifest: dict[str, Any], _seen: frozenset[Path] = frozenset()) -> d
 def _ancestor_manifest(parent: dict[str, Any]) -> Path | None:
     """The manifest on disk of an ``init_from`` record's weights: at its recorded path if that still
     holds its digest, else any ``checkpoints/*`` or ``runs/**`` manifest with that digest (a path
-    whose weights were replaced since, e.g. a shipped checkpoint swapped for its continuation)."""
+    whose weights were replaced since, e.g. a shipped checkpoint swapped for its continuation).
+    The tree is scanned only when the recorded path misses."""
     digest = parent.get("digest")
     if not digest:
         return None
-    recorded = [resolve_path(parent["path"]) / MANIFEST_FILE] if parent.get("path") else []
-    for path in recorded + _manifests_by_digest().get(digest, []):
-        if path.is_file() and json.loads(path.read_text()).get("digest") == digest:
-            return path
-    return None
+
+    def holds(path: Path) -> bool:
+        return path.is_file() and json.loads(path.read_text()).get("digest") == digest
+
+    if parent.get("path") and holds(recorded := resolve_path(parent["path"]) / MANIFEST_FILE):
+        return recorded
+    return next((path for path in _manifests_by_digest().get(digest, ()) if holds(path)), None)
 
 
+@lru_cache(maxsize=1)
 def _manifests_by_digest() -> dict[str, list[Path]]:
     """digest -> manifest paths under checkpoints/ and runs/ (read once per process)."""
-    global _DIGEST_INDEX
-    if _DIGEST_INDEX is None:
-        _DIGEST_INDEX = {}
-        for root, pattern in ((REPO_ROOT / "checkpoints", f"*/{MANIFEST_FILE}"), (REPO_ROOT / "runs", f"**/{MANIFEST_FILE}")):
-            for path in sorted(root.glob(pattern)) if root.is_dir() else []:
-                try:
-                    digest = json.loads(path.read_text()).get("digest")
-                except (OSError, ValueError):
-                    continue
-                if digest:
-                    _DIGEST_INDEX.setdefault(digest, []).append(path)
-    return _DIGEST_INDEX
-
-
-_DIGEST_INDEX: dict[str, list[Path]] | None = None
+    index: dict[str, list[Path]] = {}
+    for root, pattern in ((REPO_ROOT / "checkpoints", f"*/{MANIFEST_FILE}"), (REPO_ROOT / "runs", f"**/{MANIFEST_FILE}")):
+        for path in sorted(root.glob(pattern)) if root.is_dir() else []:
+            try:
+                digest = json.loads(path.read_text()).get("digest")
+            except (OSError, ValueError):
+                continue
+            if digest:
+                index.setdefault(digest, []).append(path)
+    return index
 
 
 def load_init_weights(ckpt_dir: str | Path, cfg: Config) -> tuple[dict[str, torch.Tensor], dict[str, Any]]:
