@@ -1,48 +1,80 @@
-"""Train the sparse PointMaze models on one CUDA GPU at the paper's batch, in a fixed wall-clock.
+"""Train maze models on one CUDA GPU at the paper's batch, all concurrently, to one deadline.
 
-    python3 jobs/gpu_train.py OUT_DIR                         # on a machine with a GPU (the H200 device)
-    python3 jobs/gpu_train.py OUT_DIR --budget-s 240 train.precision=bf16   # extra words go to every run
-    python3 jobs/gpu_train.py OUT_DIR --dry-run               # CPU: tiny data and model, seconds (tested)
+    python3 jobs/gpu_train.py OUT_DIR                           # the H200 device: --set campaign, ~8.5 min
+    python3 jobs/gpu_train.py OUT_DIR --set scratch             # the three sparse models from scratch (paper recipe)
+    python3 jobs/gpu_train.py OUT_DIR --train-until-s 300 train.precision=bf16   # extra words go to every run
+    python3 jobs/gpu_train.py OUT_DIR --dry-run                 # CPU: tiny data and model, seconds (tested)
 
 Made for a session lent the ``device`` tool's H200 (15 minutes in all, the machine's start
 included, nothing downloadable there), so it uses only the standard library until the project
 is importable:
 
-1. install: the project goes on PYTHONPATH (``pip install --no-deps -e .`` needs network-free
-   setuptools, which is not worth the risk); packages the image lacks (omegaconf and its
-   antlr4 runtime; for dataset generation also mujoco, gymnasium, ogbench) are installed from
-   ``.whl/`` if that folder was carried (see the device README), into /tmp/site.
-2. datasets: present ones (data.root) are verified by jobs/train.py; missing ones are made by
-   jobs/make_dataset.py, all at once in parallel (about 2 min each on one core here).
-3. training: pointmaze-{medium,large,giant}-h5 run concurrently on the one GPU, each a
-   jobs/train.py subprocess at batch 1024 (the paper's) with train.time_budget_s=--budget-s
-   (no boundary loss: at H=5 it traded Fast-MCTD success for warp-free plans, results 4; add
-   train.boundary_weight=3 as an extra word to get it),
-   device=cuda, into runs/gpu/<env>-h5 (resumable like every run).
-4. output: model.pt + manifest.json of each model copied to OUT_DIR/<env>-h5/ (6 files of
-   about 5 MB for the 6 x 128 model), plus OUT_DIR/train_logs.txt (7 files in all).
-
-Budget: the defaults (datasets present, 420 s of training) end within ~8 minutes; with three
-datasets to make first, give --budget-s 300.
+1. install: the project goes on PYTHONPATH; packages the image lacks (omegaconf and its antlr4
+   runtime; for dataset generation mujoco, mujoco-core, gymnasium, glfw,
+   farama-notifications, ogbench) are installed from ``.whl/`` if that folder was carried (see
+   the device README), into /tmp/site.
+2. datasets: one jobs/make_dataset.py per maze, all at once (present ones are only verified);
+   each maze's models start the moment its dataset is ready, so the GPU is busy early.
+3. training: every model of the set is a jobs/train.py subprocess at batch 1024 (the paper's),
+   device=cuda, into runs/gpu/<name> (resumable like every run). Each gets the wall time left to
+   the common deadline (--train-until-s after this script started, less a start-up margin) as
+   train.time_budget_s with the LR decayed to 0 by a cosine over it, and one snapshot at half
+   of it. Sets: ``campaign`` continues the six shipped campaign PointMaze models
+   (checkpoints/campaign-pointmaze-{medium,large,giant}-h{5,1}, carried) with each one's own
+   recipe levers (the boundary loss, the clean context); ``scratch`` trains the three sparse ones
+   from scratch with the paper's recipe.
+4. output: one OUT_DIR/<name>.tar per model (its model.pt + manifest.json, and the half-way
+   snapshot's; < 16 MiB for the 6 x 128 model) and OUT_DIR/train_logs.txt with each run's last
+   lines and each dataset's sha256: at most 7 files, inside the device tool's 8. A run that
+   outlives the deadline by --grace-s is killed and its last checkpoint is packed.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import shutil
 import subprocess
 import sys
+import tarfile
+import threading
 import time
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parent.parent
 ENVS = ("pointmaze-medium", "pointmaze-large", "pointmaze-giant")
 NEEDED = ("omegaconf", "tqdm", "numpy", "torch")  # what jobs/train.py imports beyond the standard library
+FOR_DATA = ("mujoco", "gymnasium", "ogbench", "glfw")  # jobs/make_dataset.py's too (gymnasium's MuJoCo imports glfw)
 PAPER_BATCH = 1024
+TAR_LIMIT = 16 * 2**20  # the device tool's per-file limit
+START_MARGIN_S = 45.0  # a run's start (imports, CUDA, data) and its last checkpoint, outside its budget
+
+
+def _campaign(maze: str, jump: int, *levers: str) -> tuple[str, list[str]]:
+    name = f"pointmaze-{maze}-h{jump}"
+    return name, [f"env=pointmaze-{maze}", f"jump={jump}", f"train.init_from=checkpoints/campaign-{name}", *levers]
+
+
+BW, CC = "train.boundary_weight=3", "train.clean_context=0.5"
+SETS: dict[str, list[tuple[str, list[str]]]] = {
+    # each shipped campaign model with the levers its manifest records (docs/results.md section 4)
+    "campaign": [_campaign("medium", 5), _campaign("large", 5, BW), _campaign("giant", 5, BW),
+                 _campaign("medium", 1, BW), _campaign("large", 1, BW, CC), _campaign("giant", 1, BW, CC)],
+    "scratch": [(f"{e}-h5", [f"env={e}", "jump=5"]) for e in ENVS],
+}
 DRY = ["data.episodes=8", "data.episode_steps=301", "env.horizon=100", "data.train_window=100", "env.max_steps=100",
        "model.width=32", "model.layers=2", "model.heads=2", "model.ff=64", "train.batch_size=16",
        "train.val_batches=1", "train.warmup=10", "device=cpu", "train.threads=1"]
+
+
+def merge(*lists: list[str]) -> list[str]:
+    """key=value words, the last value of each key winning (the CLI refuses a key given twice)."""
+    out: dict[str, str] = {}
+    for words in lists:
+        for w in words:
+            out[w.split("=", 1)[0]] = w
+    return list(out.values())
 
 
 def log(msg: str) -> None:
@@ -52,86 +84,161 @@ def log(msg: str) -> None:
 def install(env: dict[str, str]) -> dict[str, str]:
     """PYTHONPATH with the project (and carried wheels); stop with a clear line if a package is still missing."""
     paths = [str(REPO)]
-    wheels = sorted((REPO / ".whl").glob("*")) if (REPO / ".whl").is_dir() else []
-    if wheels:
+    wheels = sorted((REPO / ".whl").glob("*.whl")) if (REPO / ".whl").is_dir() else []
+    if wheels and _missing(NEEDED + FOR_DATA, {**env, "PYTHONPATH": str(REPO)}):  # else the machine has them
         site = Path("/tmp/site")
         subprocess.run([sys.executable, "-m", "pip", "install", "-q", "--no-index", "--no-deps", "--no-compile",
                         "--no-build-isolation", "--upgrade", "--target", str(site), *map(str, wheels)], check=True)
         paths.append(str(site))
     env = {**env, "PYTHONPATH": os.pathsep.join(paths + [p for p in [env.get("PYTHONPATH")] if p])}
-    probe = "import importlib.util as u, sys; print(' '.join(m for m in sys.argv[1:] if u.find_spec(m) is None))"
-    missing = subprocess.run([sys.executable, "-c", probe, *NEEDED], env=env, capture_output=True,
-                             text=True).stdout.split()
+    missing = _missing(NEEDED, env)
     if missing:
         raise SystemExit(f"error: packages missing: {' '.join(missing)}; carry their wheels in .whl/ (see "
                          "/work/.library/device/README.md) or pip install them")
     return env
 
 
+def _missing(modules: tuple[str, ...], env: dict[str, str]) -> list[str]:
+    probe = "import importlib.util as u, sys; print(' '.join(m for m in sys.argv[1:] if u.find_spec(m) is None))"
+    return subprocess.run([sys.executable, "-c", probe, *modules], env=env, capture_output=True, text=True).stdout.split()
+
+
 def run_all(cmds: dict[str, list[str]], env: dict[str, str], logs: Path) -> None:
     """Run the commands concurrently (one log each); stop with the failed one's log tail."""
-    procs = {}
-    for name, cmd in cmds.items():
-        f = open(logs / f"{name}.log", "w")
-        procs[name] = (subprocess.Popen(cmd, cwd=REPO, env=env, stdout=f, stderr=subprocess.STDOUT), f)
-        log(f"started {name}: {' '.join(cmd[1:])}")
-    failed = []
-    for name, (p, f) in procs.items():
-        rc = p.wait()
-        f.close()
-        log(f"{name} finished (exit {rc})")
-        if rc:
-            failed.append(name)
+    procs = {name: start(name, cmd, env, logs) for name, cmd in cmds.items()}
+    failed = [name for name, p in procs.items() if p.wait()]
+    for name in procs:
+        log(f"{name} finished (exit {procs[name].returncode})")
     if failed:
-        tail = (logs / f"{failed[0]}.log").read_text().replace("\r", "\n").strip().splitlines()[-10:]
-        raise SystemExit(f"error: {', '.join(failed)} failed; the end of {failed[0]}'s log:\n" + "\n".join(tail))
+        raise SystemExit(f"error: {', '.join(failed)} failed; the end of {failed[0]}'s log:\n" + tail(logs, failed[0]))
+
+
+def start(name: str, cmd: list[str], env: dict[str, str], logs: Path) -> subprocess.Popen:
+    f = open(logs / f"{name}.log", "w")
+    log(f"started {name}: {' '.join(cmd[1:])}")
+    return subprocess.Popen(cmd, cwd=REPO, env=env, stdout=f, stderr=subprocess.STDOUT)
+
+
+def tail(logs: Path, name: str, n: int = 10) -> str:
+    path = logs / f"{name}.log"
+    lines = path.read_text().replace("\r", "\n").strip().splitlines() if path.exists() else ["(no log)"]
+    return "\n".join(lines[-n:])
+
+
+class Deadline:
+    """Seconds left to the common training deadline, counted from this script's start."""
+
+    def __init__(self, t0: float, until_s: float):
+        self.t0, self.until_s = t0, until_s
+
+    def budget(self) -> float:
+        return max(30.0, self.until_s - (time.time() - self.t0) - START_MARGIN_S)
+
+
+def maze_chain(env_name: str, models: list[tuple[str, list[str]]], words: list[str], env: dict[str, str],
+               args: argparse.Namespace, deadline: Deadline, status: dict[str, str]) -> None:
+    """Make (or verify) one maze's dataset, then train its models concurrently to the deadline."""
+    logs = args.runs / "logs"
+    data = start(f"data-{env_name}", [sys.executable, "jobs/make_dataset.py", f"env={env_name}", *words], env, logs)
+    if data.wait():
+        status[f"data-{env_name}"] = "failed:\n" + tail(logs, f"data-{env_name}")
+        log(f"data-{env_name} FAILED:\n{tail(logs, f'data-{env_name}')}")
+        return
+    status[f"data-{env_name}"] = "ok"
+    budget = 2.0 if args.dry_run else deadline.budget()
+    log(f"data-{env_name} ready after {time.time() - deadline.t0:.0f}s; its models get {budget:.0f}s each")
+    timing = [f"train.time_budget_s={budget:.0f}", f"train.snapshot_every_s={budget / 2:.0f}"]
+    procs = {name: start(name, [sys.executable, "jobs/train.py", *merge(model_words, words, timing,
+                                                                         [f"train.out={args.runs / name}"])], env, logs)
+             for name, model_words in models}
+    hard_end = deadline.t0 + args.train_until_s + args.grace_s
+    for name, p in procs.items():
+        try:
+            rc = p.wait(timeout=max(1.0, hard_end - time.time()))
+            status[name] = f"exit {rc}"
+        except subprocess.TimeoutExpired:
+            p.kill()
+            p.wait()
+            status[name] = "killed at the deadline (its last checkpoint is packed)"
+        log(f"{name}: {status[name]}")
+
+
+def pack(name: str, run: Path, out: Path) -> str:
+    """OUT/<name>.tar: the run's model.pt + manifest.json and its first snapshot's, within the file limit."""
+    if not (run / "model.pt").exists():
+        return f"{name}: no model.pt"
+    members = [run / "model.pt", run / "manifest.json"]
+    snaps = sorted((run / "snapshots").glob("k*")) if (run / "snapshots").is_dir() else []
+    for snap in snaps[:1]:
+        extra = [snap / "model.pt", snap / "manifest.json"]
+        if sum(p.stat().st_size for p in members + extra) < TAR_LIMIT - 2**20:
+            members += extra
+    with tarfile.open(out / f"{name}.tar", "w") as tar:
+        for p in members:
+            tar.add(p, arcname=f"{name}/{p.relative_to(run).as_posix()}")
+    manifest = json.loads((run / "manifest.json").read_text())
+    return (f"{name}: {manifest.get('train_steps')} steps, digest {manifest.get('digest')}, "
+            f"final losses {manifest.get('final_losses')}, {len(members) // 2} checkpoint(s) packed")
 
 
 def main(argv: list[str]) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("out", type=Path, help="folder for <env>-h5/model.pt + manifest.json")
-    ap.add_argument("--budget-s", type=float, default=420.0, help="training wall-clock per model (concurrent)")
-    ap.add_argument("--envs", default=",".join(ENVS), help="comma-separated, default all three PointMaze mazes")
+    ap.add_argument("out", type=Path, help="folder for <name>.tar per model and train_logs.txt")
+    ap.add_argument("--set", default="campaign", choices=sorted(SETS), help="which models (default campaign)")
+    ap.add_argument("--only", default="", help="comma-separated model names of the set (default all)")
+    ap.add_argument("--train-until-s", type=float, default=470.0,
+                    help="every run stops training this many seconds after the script started")
+    ap.add_argument("--grace-s", type=float, default=40.0, help="a run still going this long after it is killed")
     ap.add_argument("--runs", type=Path, default=REPO / "runs" / "gpu", help="training dirs (resumable)")
     ap.add_argument("--dry-run", action="store_true", help="CPU, tiny data (in --runs) and model, 2 s each")
     ap.add_argument("overrides", nargs="*", help="extra key=value words for every training run")
-    args = ap.parse_args(argv)
+    args = ap.parse_intermixed_args(argv)  # words may follow the options
     t0 = time.time()
-    envs = [e for e in args.envs.split(",") if e]
+    models = [(n, w) for n, w in SETS[args.set] if not args.only or n in args.only.split(",")]
+    if not models:
+        raise SystemExit(f"error: --only {args.only!r} names no model of set {args.set!r} "
+                         f"({', '.join(n for n, _ in SETS[args.set])})")
     env = install({**os.environ, "PYTHONUNBUFFERED": "1"})
-    words = ["jump=5", f"train.batch_size={PAPER_BATCH}", "device=cuda", f"train.time_budget_s={args.budget_s}",
-             "train.max_steps=1000000", "train.ckpt_every=1000"]
+    words = [f"train.batch_size={PAPER_BATCH}", "device=cuda", "train.lr_schedule=cosine", "train.budget_clock=wall",
+             "train.max_steps=1000000", "train.ckpt_every=1000", "train.threads=1"]
     if args.dry_run:
-        words = [w for w in words if not w.startswith(("train.batch_size", "device", "train.time_budget_s"))]
-        words += DRY + [f"data.root={args.runs / 'data'}", "train.time_budget_s=2"]
-    words += args.overrides
-    if not args.dry_run:
-        smi = subprocess.run(["nvidia-smi", "-L"], capture_output=True, text=True)
-        log(f"GPU: {smi.stdout.strip() or smi.stderr.strip()}")
-    logs = args.runs / "logs"
-    logs.mkdir(parents=True, exist_ok=True)
+        words = merge(words, DRY, [f"data.root={args.runs / 'data'}"])
+        models = [(n, [w for w in mw if not w.startswith("train.init_from")]) for n, mw in models]  # tiny shapes
+    else:
+        smi = shutil.which("nvidia-smi")
+        gpus = subprocess.run([smi, "-L"], capture_output=True, text=True) if smi else None
+        log(f"GPU: {(gpus.stdout.strip() or gpus.stderr.strip()) if gpus else 'no nvidia-smi'}")
+    words = merge(words, args.overrides)
+    (args.runs / "logs").mkdir(parents=True, exist_ok=True)
 
-    data = {e: [sys.executable, "jobs/make_dataset.py", f"env={e}", *words] for e in envs}
-    run_all({f"data-{e}": cmd for e, cmd in data.items()}, env, logs)  # verifies present datasets in seconds
-    log(f"datasets ready after {time.time() - t0:.0f}s")
-
-    train = {e: [sys.executable, "jobs/train.py", f"env={e}", *words, f"train.out={args.runs / (e + '-h5')}"]
-             for e in envs}
-    run_all({f"train-{e}": cmd for e, cmd in train.items()}, env, logs)
+    by_maze: dict[str, list[tuple[str, list[str]]]] = {}
+    for name, model_words in models:
+        maze = next(w.split("=", 1)[1] for w in model_words if w.startswith("env="))
+        by_maze.setdefault(maze, []).append((name, model_words))
+    deadline, status = Deadline(t0, args.train_until_s), {}
+    chains = [threading.Thread(target=maze_chain, args=(maze, ms, words, env, args, deadline, status))
+              for maze, ms in by_maze.items()]
+    for c in chains:
+        c.start()
+    for c in chains:
+        c.join()
     log(f"training done after {time.time() - t0:.0f}s")
 
     args.out.mkdir(parents=True, exist_ok=True)
-    for e in envs:
-        dst = args.out / f"{e}-h5"
-        dst.mkdir(exist_ok=True)
-        for name in ("model.pt", "manifest.json"):
-            shutil.copy2(args.runs / f"{e}-h5" / name, dst / name)
-    with open(args.out / "train_logs.txt", "w") as f:
-        for e in envs:
-            text = (logs / f"train-{e}.log").read_text().replace("\r", "\n").strip().splitlines()
-            f.write(f"== {e}\n" + "\n".join(text[-3:]) + "\n")
+    report = [f"set {args.set}; words {' '.join(words)}"]
+    for maze in by_maze:
+        m = args.runs / "data" if args.dry_run else None
+        root = m or REPO / "data"
+        sha = [json.loads(p.read_text()).get("sha256") for p in sorted(root.glob(f"{maze}-*/manifest.json"))]
+        report.append(f"data-{maze}: {status.get('data-' + maze)}; sha256 {sha}")
+    for name, _ in models:
+        report.append(pack(name, args.runs / name, args.out) + f" [{status.get(name, 'not started')}]")
+        report.append(tail(args.runs / "logs", name, 3))
+    (args.out / "train_logs.txt").write_text("\n".join(report) + "\n")
+    print("\n".join(report), flush=True)
     log(f"wrote {args.out} after {time.time() - t0:.0f}s")
-    return 0
+    return 0 if all(s.startswith(("ok", "exit 0")) for s in status.values()) and len(status) == len(models) + len(
+        by_maze) else 1
 
 
 if __name__ == "__main__":

@@ -6,23 +6,46 @@ import json
 import os
 import subprocess
 import sys
+import tarfile
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO / "jobs"))
+
+from gpu_train import SETS, merge  # noqa: E402  (the job is a script, not a package module)
 
 
-def test_gpu_train_dry_run_writes_a_checkpoint_per_maze(tmp_path):
+def test_gpu_train_dry_run_packs_one_tar_per_model(tmp_path):
     out = tmp_path / "out"
     cmd = [sys.executable, "jobs/gpu_train.py", str(out), "--dry-run", "--runs", str(tmp_path / "runs")]
     done = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=600,
                           env={**os.environ, "OMP_NUM_THREADS": "1"})
     assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
+    names = [n for n, _ in SETS["campaign"]]
     files = sorted(p.relative_to(out).as_posix() for p in out.rglob("*") if p.is_file())
-    mazes = ("medium", "large", "giant")
-    assert files == sorted([f"pointmaze-{m}-h5/{n}" for m in mazes for n in ("model.pt", "manifest.json")]
-                           + ["train_logs.txt"])
+    assert files == sorted([f"{n}.tar" for n in names] + ["train_logs.txt"])
     assert len(files) <= 8 and all((out / f).stat().st_size <= 16 * 2**20 for f in files)  # the device's limits
-    for m in mazes:
-        manifest = json.loads((out / f"pointmaze-{m}-h5" / "manifest.json").read_text())
-        assert manifest["config"]["env"]["name"] == f"pointmaze-{m}" and manifest["config"]["jump"] == 5
-        assert manifest["config"]["train"]["time_budget_s"] == 2.0 and manifest["train_steps"] > 0
+    for name in names:
+        with tarfile.open(out / f"{name}.tar") as tar:
+            members = tar.getnames()
+            manifest = json.load(tar.extractfile(f"{name}/manifest.json"))
+        assert f"{name}/model.pt" in members
+        assert any(m.startswith(f"{name}/snapshots/k") and m.endswith("model.pt") for m in members)
+        maze, jump = name.rsplit("-h", 1)
+        train = manifest["config"]["train"]
+        assert manifest["config"]["env"]["name"] == maze and manifest["config"]["jump"] == int(jump)
+        assert train["time_budget_s"] == 2.0 and train["lr_schedule"] == "cosine" and manifest["train_steps"] > 0
+        # each model keeps the recipe levers its campaign manifest records
+        assert train["boundary_weight"] == (0.0 if name == "pointmaze-medium-h5" else 3.0)
+        assert train["clean_context"] == (0.5 if name in ("pointmaze-large-h1", "pointmaze-giant-h1") else 0.0)
+    assert "sha256" in (out / "train_logs.txt").read_text()
+
+
+def test_campaign_set_starts_from_the_shipped_campaign_weights():
+    for name, words in SETS["campaign"]:
+        assert f"train.init_from=checkpoints/campaign-{name}" in words
+        assert (REPO / "checkpoints" / f"campaign-{name}" / "manifest.json").exists()
+
+
+def test_merge_keeps_the_last_value_of_each_key():
+    assert merge(["device=cuda", "train.batch_size=1024"], ["device=cpu"]) == ["device=cpu", "train.batch_size=1024"]
