@@ -23,7 +23,7 @@ from omegaconf.errors import OmegaConfBaseException
 
 from fmctd_dist.errors import ConfigError, did_you_mean, unknown_name
 from fmctd_dist.families import ANT_ENVS, CUBE_ENVS, ENV_NAMES, MAZES, POINT_ENVS  # noqa: F401 - re-exported
-from fmctd_dist.families import ENV_FIELD_READERS, PENDING_FAMILIES, family, require_family, state_dim
+from fmctd_dist.families import ENV_FIELD_READERS, MAZE_FAMILIES, PENDING_FAMILIES, family, require_family, state_dim
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 CONFIG_DIR = REPO_ROOT / "configs"
@@ -296,6 +296,10 @@ class MethodConfig:
     warp_threshold: float = spec(2.0, gt=0, why="max plan step in world units before a plan is a warp "
                                                 "(1.0 dense, 2.0 at H=5)")
     goal_radius: float = spec(2.0, gt=0, why="value: a plan reaches the goal within this radius (paper 2)")
+    # Not the paper's (its value tests warps only): value 0 also for a plan whose path crosses a wall
+    # before it reaches the goal, tested at 10 points per step on the maze's cells. Smooth models
+    # pass the warp test through walls (results §4, session 23-24); point / ant mazes only.
+    wall_test: bool = False
     bad_plan_tries: int = spec(10, ge=1, why="re-samples of plans that barely move")
     bad_plan_step: float = spec(0.1, ge=0, why="a plan barely moves if every step is below this")
     uct_c: float = spec(1.4142135623730951, ge=0, why="UCT exploration constant (sqrt 2)")
@@ -564,6 +568,9 @@ def validate(cfg: Config) -> None:
     """Declared ranges, then cross-field checks; raise one ConfigError naming the field and the fix."""
     check_ranges(cfg)
     check_env_fields(cfg.env)
+    if cfg.method.wall_test and family(cfg.env.name) not in MAZE_FAMILIES:
+        raise ConfigError(f"method.wall_test=true needs a point or ant maze (the walls come from its cells); "
+                          f"env.name={cfg.env.name} ({family(cfg.env.name)}) has none. Drop method.wall_test")
     if cfg.model.kind == "diffuser" and cfg.method.planner != "diffuser":
         raise ConfigError(
             f"model.kind=diffuser with method.planner={cfg.method.planner}: the U-Net gives all plan tokens one "

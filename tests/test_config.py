@@ -85,3 +85,12 @@ def test_env_fields_their_family_reads_load():
     assert load_config(["env=cube-triple", "env.start_tolerance=0.5"]).env.start_tolerance == 0.5
     assert load_config(["env=antmaze-medium", "env.policy=x"]).env.policy == "x"
     assert load_config(["env=visual-pointmaze-large", "env.warp_sparse=8.0"]).env.warp_sparse == 8.0
+
+
+def test_wall_test_is_for_point_and_ant_mazes_only():
+    from fmctd_dist.config import load_config
+    from fmctd_dist.errors import ConfigError
+
+    assert load_config(["env=antmaze-large", "method.wall_test=true"]).method.wall_test
+    with pytest.raises(ConfigError, match="method.wall_test"):
+        load_config(["env=cube-single", "method.wall_test=true"])

@@ -72,3 +72,28 @@ def test_bad_task_and_seed():
         check_seed(1.5)
     with pytest.raises(ConfigError, match="env.name"):
         make_env("pointmaze-huge")
+
+
+def test_steps_cross_wall_matches_the_cells_and_the_value_uses_it():
+    from fmctd_dist.config import load_config
+    from fmctd_dist.hooks.maze import plan_rules
+    from fmctd_dist.search.actions import scale_actions
+
+    geo = maze_geometry("pointmaze-medium")
+    free = np.argwhere(geo.walls == 0)
+    # two free cells side by side in a row, and a free cell with a wall cell between it and another free one
+    a = next((i, j) for i, j in free if geo.walls[i, j + 1] == 0)
+    b = next((i, j) for i, j in free if j + 2 < geo.walls.shape[1] and geo.walls[i, j + 1] == 1
+             and geo.walls[i, j + 2] == 0)
+    xy = geo.cell_to_xy
+    ok = np.stack([xy(a), xy((a[0], a[1] + 1))])
+    through = np.stack([xy(b), xy((b[0], b[1] + 2))])
+    assert not geo.steps_cross_wall(ok[None])[0, 0] and geo.steps_cross_wall(through[None])[0, 0]
+    assert geo.steps_cross_wall(np.stack([ok, through])).shape == (2, 1)
+
+    start, goal = through[0], through[1]
+    plans = np.stack([start + (goal - start) * k / 8 for k in range(1, 10)])[None]  # small steps, straight through
+    cfg = load_config(["env=pointmaze-medium", "method=fast-mctd"])
+    paper = plan_rules(cfg).value.values(plans, start, goal, scale_actions([0.0]))
+    walled = plan_rules(load_config(["env=pointmaze-medium", "method=fast-mctd", "method.wall_test=true"]))
+    assert paper[0][0] > 0 and walled.value.values(plans, start, goal, scale_actions([0.0]))[0][0] == 0

@@ -97,3 +97,15 @@ def test_truncate_at_goal_appends_goal():
     assert out.dtype == np.float32 and out.shape == (5, 2)
     np.testing.assert_array_equal(out[:4], plan[:4])
     np.testing.assert_array_equal(out[-1], GOAL)
+
+
+def test_blocked_steps_count_as_warps_before_the_reach_only():
+    plans = line(0.5, 1.5, 2.5, 3.5, 4.5, 5.0, 99.0)  # reaches at t = 3
+    blocked = np.zeros((1, 6), bool)
+    blocked[0, 1] = True  # a wall between 0.5 and 1.5
+    assert score(plans)[1][0] == ACHIEVED
+    v, s, t = plan_values(plans, START, GOAL, 1.5, 2.0, blocked)
+    assert (v[0], s[0], t[0]) == (0.0, WARP, -1)
+    blocked[:] = False
+    blocked[0, 4] = True  # after the reach: does not matter, as for a warp
+    assert plan_values(plans, START, GOAL, 1.5, 2.0, blocked)[1][0] == ACHIEVED

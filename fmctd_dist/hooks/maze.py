@@ -36,8 +36,13 @@ class MazeRules:
 
 def plan_rules(cfg: Config) -> MazeRules:
     m = cfg.method
+    crosses_wall = None
+    if m.wall_test:  # not the paper's: the maze's cells say which steps cross a wall
+        from fmctd_dist.envs import maze_geometry
+
+        crosses_wall = maze_geometry(cfg.env.name).steps_cross_wall
     return MazeRules(tuple(float(s) for s in m.guidance_scales), float(m.guidance_scale),
-                     MazeValue(float(m.warp_threshold), float(m.goal_radius)))
+                     MazeValue(float(m.warp_threshold), float(m.goal_radius), crosses_wall))
 
 
 def check_episodes(cfg: Config) -> str:

@@ -12,7 +12,7 @@ import numpy as np
 
 NOT_REACHED = 0  # never within goal_radius, no warp before the end: value 0
 ACHIEVED = 1  # within goal_radius at reach_t with no warp up to and including reach_t
-WARP = 2  # a step longer than warp_threshold before reaching: value 0
+WARP = 2  # a step longer than warp_threshold (or, with a wall test, through a wall) before reaching: value 0
 STATUS_NAMES = {NOT_REACHED: "not_reached", ACHIEVED: "achieved", WARP: "warp"}
 
 
@@ -22,8 +22,12 @@ def plan_values(
     goal: np.ndarray,
     warp_threshold: float,
     goal_radius: float = 2.0,
+    blocked: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Score plans [B, F, d] (world units) from ``start`` [d] towards ``goal`` [d].
+
+    ``blocked`` [B, F'] bool (optional; not the paper's): the step at t crosses a wall. Such a step
+    counts as a warp, so a plan through a wall is worth 0 like one that teleports.
 
     The last frame is dropped as a dummy; frames t = 0..F'-1 (F' = F - 1) are scanned.
     The step at t is |p_0 - start| for t = 0, else |p_t - p_{t-1}|. At each t the warp
@@ -42,6 +46,8 @@ def plan_values(
     steps = np.linalg.norm(p - prev, axis=-1)  # [B, F']
     near = np.linalg.norm(p - goal, axis=-1) < goal_radius  # [B, F']
     warp = steps > warp_threshold  # [B, F']
+    if blocked is not None:
+        warp = warp | np.asarray(blocked, bool)[:, :f]
     first_near = np.where(near.any(1), near.argmax(1), f)  # [B], f = never
     first_warp = np.where(warp.any(1), warp.argmax(1), f)  # [B]
     achieved = first_near < first_warp

@@ -9,6 +9,7 @@ pluggable (golden trees unchanged).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
@@ -42,17 +43,28 @@ class PlanValue(Protocol):
 
 @dataclass(frozen=True)
 class MazeValue:
-    """reference §4: reach within ``goal_radius`` early, no step over ``warp_threshold`` (world units)."""
+    """reference §4: reach within ``goal_radius`` early, no step over ``warp_threshold`` (world units).
+
+    ``crosses_wall`` (method.wall_test; not the paper's): [B, F + 1, 2] paths, start first ->
+    [B, F] bool, step t crosses a wall; such a step counts as a warp. The env hands it in (the
+    maze's cells), so the search never learns what a wall is.
+    """
 
     warp_threshold: float = 2.0
     goal_radius: float = 2.0
+    crosses_wall: Callable[[np.ndarray], np.ndarray] | None = None
 
     def prepare(self, plans: np.ndarray, start: np.ndarray, actions: Actions) -> np.ndarray:
         return plans  # one agent, every dim guided: nothing to pin
 
     def values(self, plans: np.ndarray, start: np.ndarray, goal: np.ndarray,
                actions: Actions) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        return plan_values(plans, start, goal, self.warp_threshold, self.goal_radius)
+        blocked = None
+        if self.crosses_wall is not None:
+            head = np.asarray(plans, np.float64)[:, :-1]  # the frames plan_values scans
+            lead = np.broadcast_to(np.asarray(start, np.float64), (head.shape[0], 1, head.shape[2]))
+            blocked = self.crosses_wall(np.concatenate([lead, head], axis=1))
+        return plan_values(plans, start, goal, self.warp_threshold, self.goal_radius, blocked)
 
     def output(self, plan: np.ndarray, reach_t: int, goal: np.ndarray) -> np.ndarray:
         """Reached: frames up to the reach, then the goal as final waypoint; else every frame but the dummy."""
