@@ -134,10 +134,8 @@ class MazeGeometry:
     def steps_cross_wall(self, path: np.ndarray, per_step: int = 10) -> np.ndarray:
         """[..., F + 1, 2] polylines -> [..., F] bool: step t (point t to t + 1) leaves the free cells at
         one of ``per_step`` evenly spaced points along it (its end included): the value's wall test."""
-        path = np.asarray(path, dtype=np.float64)
-        frac = np.linspace(1.0 / per_step, 1.0, per_step)[:, None]  # [k, 1]
-        seg = path[..., :-1, None, :] + frac * (path[..., 1:, None, :] - path[..., :-1, None, :])  # [..., F, k, 2]
-        return ~self.in_free_cell(seg).all(-1)
+        along = densify(path, per_step)[..., 1:, :]  # [..., F * k, 2], step-major
+        return ~self.in_free_cell(along.reshape(*along.shape[:-2], -1, per_step, 2)).all(-1)
 
 
 def densify(path: np.ndarray, per_step: int = 10) -> np.ndarray:
