@@ -130,7 +130,6 @@ class MazeGeometry:
         path crosses no wall; a straight step of up to 4 units can cut a wall's corner otherwise)."""
         return self.in_free_cell(densify(path, per_step)).all(-1)
 
-
     def steps_cross_wall(self, path: np.ndarray, per_step: int = 10) -> np.ndarray:
         """[..., F + 1, 2] polylines -> [..., F] bool: step t (point t to t + 1) leaves the free cells at
         one of ``per_step`` evenly spaced points along it (its end included): the value's wall test."""
