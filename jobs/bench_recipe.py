@@ -36,6 +36,7 @@ from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
+from cli_words import merge  # same folder
 from tqdm import tqdm
 
 REPO = Path(__file__).resolve().parent.parent
@@ -74,19 +75,10 @@ class Arm:
         return f"{own} on {self.base}'s model" if self.base else own
 
 
-def merged(*word_lists: list[str]) -> list[str]:
-    """key=value words, a later list's value replacing an earlier one's for the same key."""
-    out: dict[str, str] = {}
-    for words in word_lists:
-        for w in words:
-            out[w.split("=", 1)[0]] = w
-    return list(out.values())
-
-
 def arm_words(args: argparse.Namespace, arm: Arm, arms: dict[str, Arm]) -> list[str]:
     """Every override word an arm's training and evaluation configs get (common, its base arm's, its own)."""
     base = arms[arm.base].words if arm.base else []
-    return merged(args.overrides, base, arm.words)
+    return merge(args.overrides, base, arm.words)
 
 
 def finished(ckpt: Path, budget_s: float) -> bool:
@@ -134,7 +126,7 @@ def do_arm(args: argparse.Namespace, arm: Arm, arms: dict[str, Arm]) -> dict[str
     out.mkdir(parents=True, exist_ok=True)
     words = arm_words(args, arm, arms)
     if arm.base is None and not finished(ckpt, args.budget_s):
-        train_words = merged([RUN_FOREVER], words, [f"train.out={ckpt}", f"train.time_budget_s={args.budget_s}",
+        train_words = merge([RUN_FOREVER], words, [f"train.out={ckpt}", f"train.time_budget_s={args.budget_s}",
                                                      "train.threads=1"])
         wall, cpu = run_logged([sys.executable, "jobs/train.py", *train_words], out / "train.log")
         (out / "train_process.json").write_text(json.dumps({"wall_s": wall, "cpu_s": cpu}) + "\n")
@@ -174,7 +166,7 @@ def evaluate(args: argparse.Namespace) -> None:
     manifest = read_manifest(ckpt)
     if evaluated(out, ckpt):
         return
-    words = merged(args.overrides, [f"checkpoint={ckpt}"])
+    words = merge(args.overrides, [f"checkpoint={ckpt}"])
     cfg = load_config(words)  # method fast-mctd: the sampling settings the grid below plans with
     done = out / "bench.json"
     row: dict[str, Any] = {"arm": args.name, "words": args.overrides, "digest": manifest["digest"],
@@ -189,7 +181,7 @@ def evaluate(args: argparse.Namespace) -> None:
     run = f"recipe-{args.tag}-{args.name}"
     method = "fast-mctd" if cfg.jump > 1 else "p-mctd"  # a dense (H=1) arm searches as P-MCTD, the paper's dense twin
     row["search_method"] = method
-    grid = merged(words, [f"method={method}", "runner=local", f"tasks=[{args.tasks}]", f"seeds=[{args.seeds}]",
+    grid = merge(words, [f"method={method}", "runner=local", f"tasks=[{args.tasks}]", f"seeds=[{args.seeds}]",
                           "eval.threads=1", f"eval.run={run}", f"eval.out={args.results_out}",
                           f"eval.episode_time_limit={args.episode_limit_s}"])
     t0 = time.time()

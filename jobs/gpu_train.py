@@ -42,6 +42,8 @@ import threading
 import time
 from pathlib import Path
 
+from cli_words import merge  # same folder, standard library only
+
 REPO = Path(__file__).resolve().parent.parent
 ENVS = ("pointmaze-medium", "pointmaze-large", "pointmaze-giant")
 NEEDED = ("omegaconf", "tqdm", "numpy", "torch")  # what jobs/train.py imports beyond the standard library
@@ -66,15 +68,6 @@ SETS: dict[str, list[tuple[str, list[str]]]] = {
 DRY = ["data.episodes=8", "data.episode_steps=301", "env.horizon=100", "data.train_window=100", "env.max_steps=100",
        "model.width=32", "model.layers=2", "model.heads=2", "model.ff=64", "train.batch_size=16",
        "train.val_batches=1", "train.warmup=10", "device=cpu", "train.threads=1"]
-
-
-def merge(*lists: list[str]) -> list[str]:
-    """key=value words, the last value of each key winning (the CLI refuses a key given twice)."""
-    out: dict[str, str] = {}
-    for words in lists:
-        for w in words:
-            out[w.split("=", 1)[0]] = w
-    return list(out.values())
 
 
 def log(msg: str) -> None:
@@ -103,20 +96,11 @@ def _missing(modules: tuple[str, ...], env: dict[str, str]) -> list[str]:
     return subprocess.run([sys.executable, "-c", probe, *modules], env=env, capture_output=True, text=True).stdout.split()
 
 
-def run_all(cmds: dict[str, list[str]], env: dict[str, str], logs: Path) -> None:
-    """Run the commands concurrently (one log each); stop with the failed one's log tail."""
-    procs = {name: start(name, cmd, env, logs) for name, cmd in cmds.items()}
-    failed = [name for name, p in procs.items() if p.wait()]
-    for name in procs:
-        log(f"{name} finished (exit {procs[name].returncode})")
-    if failed:
-        raise SystemExit(f"error: {', '.join(failed)} failed; the end of {failed[0]}'s log:\n" + tail(logs, failed[0]))
-
-
 def start(name: str, cmd: list[str], env: dict[str, str], logs: Path) -> subprocess.Popen:
-    f = open(logs / f"{name}.log", "w")
+    """The command in the background, its output in logs/<name>.log (the child keeps the file open)."""
     log(f"started {name}: {' '.join(cmd[1:])}")
-    return subprocess.Popen(cmd, cwd=REPO, env=env, stdout=f, stderr=subprocess.STDOUT)
+    with open(logs / f"{name}.log", "w") as f:
+        return subprocess.Popen(cmd, cwd=REPO, env=env, stdout=f, stderr=subprocess.STDOUT)
 
 
 def tail(logs: Path, name: str, n: int = 10) -> str:
@@ -142,7 +126,7 @@ def maze_chain(env_name: str, models: list[tuple[str, list[str]]], words: list[s
     data = start(f"data-{env_name}", [sys.executable, "jobs/make_dataset.py", f"env={env_name}", *words], env, logs)
     if data.wait():
         status[f"data-{env_name}"] = "failed:\n" + tail(logs, f"data-{env_name}")
-        log(f"data-{env_name} FAILED:\n{tail(logs, f'data-{env_name}')}")
+        log(f"data-{env_name} {status[f'data-{env_name}']}")
         return
     status[f"data-{env_name}"] = "ok"
     budget = 2.0 if args.dry_run else deadline.budget()
@@ -226,9 +210,8 @@ def main(argv: list[str]) -> int:
 
     args.out.mkdir(parents=True, exist_ok=True)
     report = [f"set {args.set}; words {' '.join(words)}"]
+    root = args.runs / "data" if args.dry_run else REPO / "data"
     for maze in by_maze:
-        m = args.runs / "data" if args.dry_run else None
-        root = m or REPO / "data"
         sha = [json.loads(p.read_text()).get("sha256") for p in sorted(root.glob(f"{maze}-*/manifest.json"))]
         report.append(f"data-{maze}: {status.get('data-' + maze)}; sha256 {sha}")
     for name, _ in models:

@@ -12,7 +12,8 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO / "jobs"))
 
-from gpu_train import SETS, merge  # noqa: E402  (the job is a script, not a package module)
+from cli_words import merge  # noqa: E402  (job scripts, not package modules)
+from gpu_train import SETS  # noqa: E402
 
 
 def test_gpu_train_dry_run_packs_one_tar_per_model(tmp_path):
