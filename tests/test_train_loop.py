@@ -146,11 +146,15 @@ def test_init_from_starts_a_new_env_and_horizon_from_another_checkpoints_weights
     # the training behind the weights counts the ancestor's steps and CPU time, and a grandchild counts both
     assert manifest["lineage_steps"] == 20
     assert manifest["lineage_cpu_s"] == pytest.approx(manifest["cpu_time_s"] + src_manifest["cpu_time_s"])
-    grand = tiny_cfg(5, "env=pointmaze-giant", f"train.init_from={dst}", "train.lr=1e-30")
+    grand = tiny_cfg(5, "env=pointmaze-giant", f"train.init_from={dst}", "train.lr=1e-30", "train.batch_size=4")
     train(grand, FakeData(n_tokens=21, digest="other-data"), tmp_path / "grand", progress=False)
     _, g = load_checkpoint(tmp_path / "grand", grand)
     assert g["init_from"]["lineage_steps"] == 20 and g["lineage_steps"] == 25
     assert g["lineage_cpu_s"] == pytest.approx(g["cpu_time_s"] + manifest["lineage_cpu_s"])
+    # samples: each run's steps at its own batch size (a CPU run continued on a GPU changes it)
+    batch = lambda m: m["config"]["train"]["batch_size"]  # noqa: E731
+    assert manifest["lineage_samples"] == 10 * batch(manifest) + 10 * batch(src_manifest)
+    assert g["lineage_samples"] == 5 * batch(g) + manifest["lineage_samples"]
 
 
 def test_lineage_of_a_manifest_from_before_the_field():
@@ -159,8 +163,8 @@ def test_lineage_of_a_manifest_from_before_the_field():
     from fmctd_dist.diffusion.checkpoint import lineage
 
     old_child = {"train_steps": 3654, "cpu_time_s": 2100.0, "init_from": {"digest": "9c01", "train_steps": 6000}}
-    assert lineage(old_child) == {"lineage_steps": 9654, "lineage_cpu_s": None}
-    assert lineage({"train_steps": 10, "wall_time_s": 5.0}) == {"lineage_steps": 10, "lineage_cpu_s": 5.0}
+    assert lineage(old_child) == {"lineage_steps": 9654, "lineage_cpu_s": None, "lineage_samples": None}
+    assert lineage({"train_steps": 10, "wall_time_s": 5.0}) == {"lineage_steps": 10, "lineage_cpu_s": 5.0, "lineage_samples": None}
 
 
 def test_lineage_reads_an_ancestor_still_on_disk(tmp_path):
@@ -175,9 +179,9 @@ def test_lineage_reads_an_ancestor_still_on_disk(tmp_path):
     (tmp_path / "parent" / "manifest.json").write_text(json.dumps(parent))
     child = {"train_steps": 1000, "cpu_time_s": 10.0,
              "init_from": {"digest": "p", "path": str(tmp_path / "parent"), "train_steps": 7769, "lineage_steps": 7769}}
-    assert lineage(child) == {"lineage_steps": 14769, "lineage_cpu_s": None}
+    assert lineage(child) == {"lineage_steps": 14769, "lineage_cpu_s": None, "lineage_samples": None}
     replaced = {**child, "init_from": {**child["init_from"], "digest": "other"}}
-    assert lineage(replaced) == {"lineage_steps": 8769, "lineage_cpu_s": None}
+    assert lineage(replaced) == {"lineage_steps": 8769, "lineage_cpu_s": None, "lineage_samples": None}
 
 
 def test_lineage_finds_an_ancestor_whose_path_now_holds_other_weights(tmp_path, monkeypatch):
@@ -194,7 +198,7 @@ def test_lineage_finds_an_ancestor_whose_path_now_holds_other_weights(tmp_path, 
     monkeypatch.setattr(checkpoint, "_manifests_by_digest", lambda: {"p": [tmp_path / "moved" / "manifest.json"]})
     child = {"train_steps": 1000, "cpu_time_s": 10.0,
              "init_from": {"digest": "p", "path": str(tmp_path / "shipped"), "train_steps": 7769}}
-    assert checkpoint.lineage(child) == {"lineage_steps": 14769, "lineage_cpu_s": 3010.0}
+    assert checkpoint.lineage(child) == {"lineage_steps": 14769, "lineage_cpu_s": 3010.0, "lineage_samples": None}
 
 
 def test_init_from_with_another_architecture_is_one_clear_error(tmp_path):

@@ -400,17 +400,23 @@ def lineage(manifest: dict[str, Any], _seen: frozenset[Path] = frozenset()) -> d
     where an ancestor predates this field and its CPU time is unknown (its steps are known: the
     provenance always kept them). An ancestor still on disk (under its recorded path, or any
     checkpoint or run dir holding its digest) is read again, so a record written before this field
-    (or from such a record) cannot undercount.
+    (or from such a record) cannot undercount. ``lineage_samples`` (steps x batch, summed over the
+    ancestors) is what a curve should be read against when batch sizes differ along the way (a CPU run
+    at 128 continued on a GPU at 1024); None where a record lacks its batch size.
     """
     parent = manifest.get("init_from") or {}
     on_disk = _ancestor_manifest(parent)
     if on_disk is not None and on_disk not in _seen:  # the same weights: their own record is the truth
         parent = {**parent, **lineage(json.loads(on_disk.read_text()), _seen | {on_disk})}
     cpu = manifest.get("cpu_time_s", manifest.get("wall_time_s"))
+    steps = int(manifest.get("train_steps") or 0)
+    batch = manifest.get("config", {}).get("train", {}).get("batch_size")
     parent_steps = parent.get("lineage_steps", parent.get("train_steps")) or 0
     parent_cpu = parent.get("lineage_cpu_s") if parent else 0.0
-    return {"lineage_steps": int(manifest.get("train_steps") or 0) + int(parent_steps),
-            "lineage_cpu_s": None if cpu is None or parent_cpu is None else float(cpu) + float(parent_cpu)}
+    parent_samples = parent.get("lineage_samples") if parent else 0
+    return {"lineage_steps": steps + int(parent_steps),
+            "lineage_cpu_s": None if cpu is None or parent_cpu is None else float(cpu) + float(parent_cpu),
+            "lineage_samples": None if batch is None or parent_samples is None else steps * int(batch) + int(parent_samples)}
 
 
 def _ancestor_manifest(parent: dict[str, Any]) -> Path | None:

@@ -303,7 +303,7 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
         fields = {**base, "ema_decay": tc.ema_decay, "config": cfg.to_dict(), "train_steps": step, "wall_time_s": wall,
                   "cpu_time_s": cpu, "vs_paper": vs_paper(cfg, step), "final_losses": summary["final_losses"],
                   "val_history": history["val"]}
-        fields.update(lineage({"train_steps": step, "cpu_time_s": cpu, "init_from": init_from}))
+        fields.update(lineage(fields))  # steps, CPU time and samples, through every init_from ancestor
         save_checkpoint(out_dir, ema, fields)
         snap = snapshot_due(out_dir, tc.snapshot_every_s, budget_time(cfg, wall, cpu))
         if snap is not None:
