@@ -173,6 +173,8 @@ class DataConfig:
     expert: str = "checkpoints/ant-expert"  # antmaze only: the ant expert dir whose actions make the data
     val_fraction: float = spec(0.1, ge=0, le=1, why="extra validation episodes as a fraction of data.episodes")
     train_window: int = spec(500, gt=0, why="raw env steps in one training window (= env.horizon)")
+    # how the data is made, never what: any value writes the same bytes (episodes are independent)
+    workers: int = spec(1, ge=1, why="processes that generate navigate episodes, e.g. the machine's cores")
 
 
 @dataclass

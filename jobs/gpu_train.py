@@ -2,6 +2,7 @@
 
     python3 jobs/gpu_train.py OUT_DIR                           # the H200 device: --set campaign, ~8.5 min
     python3 jobs/gpu_train.py OUT_DIR --set scratch             # the three sparse models from scratch (paper recipe)
+    python3 jobs/gpu_train.py OUT_DIR --set ant                 # the six AntMaze models from the campaign ones
     python3 jobs/gpu_train.py OUT_DIR --train-until-s 300 train.precision=bf16   # extra words go to every run
     python3 jobs/gpu_train.py OUT_DIR --dry-run                 # CPU: tiny data and model, seconds (tested)
 
@@ -13,8 +14,9 @@ is importable:
    runtime; for dataset generation mujoco, mujoco-core, gymnasium, glfw,
    farama-notifications, ogbench) are installed from ``.whl/`` if that folder was carried (see
    the device README), into /tmp/site.
-2. datasets: one jobs/make_dataset.py per maze, all at once (present ones are only verified);
-   each maze's models start the moment its dataset is ready, so the GPU is busy early.
+2. datasets: one jobs/make_dataset.py per maze, all at once (present ones are only verified),
+   each with ``data.workers`` processes (the cores shared among the mazes; the bytes do not
+   depend on it); each maze's models start the moment its dataset is ready, so the GPU is busy early.
 3. training: every model of the set is a jobs/train.py subprocess at batch 1024 (the paper's),
    device=cuda, into runs/gpu/<name> (resumable like every run). Each gets the wall time left to
    the common deadline (--train-until-s after this script started, less a start-up margin) as
@@ -22,7 +24,8 @@ is importable:
    of it. Sets: ``campaign`` continues the six shipped campaign PointMaze models
    (checkpoints/campaign-pointmaze-{medium,large,giant}-h{5,1}, carried) with each one's own
    recipe levers (the boundary loss, the clean context); ``scratch`` trains the three sparse ones
-   from scratch with the paper's recipe.
+   from scratch with the paper's recipe; ``ant`` fine-tunes the six AntMaze models from the same
+   carried campaign models (carry checkpoints/ant-expert too: its actions make the ant data).
 4. output: one OUT_DIR/<name>.tar per model (its model.pt + manifest.json, and the half-way
    snapshot's; < 16 MiB for the 6 x 128 model) and OUT_DIR/train_logs.txt with each run's last
    lines and each dataset's sha256: at most 7 files, inside the device tool's 8. A run that
@@ -58,12 +61,22 @@ def _campaign(maze: str, jump: int, *levers: str) -> tuple[str, list[str]]:
     return name, [f"env=pointmaze-{maze}", f"jump={jump}", f"train.init_from=checkpoints/campaign-{name}", *levers]
 
 
+def _ant(maze: str, jump: int) -> tuple[str, list[str]]:
+    """An AntMaze model fine-tuned from the carried campaign PointMaze model of its maze and jump
+    (section 11.6's recipe: the planner models the ant's x, y, as the point's), boundary loss on."""
+    return f"antmaze-{maze}-h{jump}", [f"env=antmaze-{maze}", f"jump={jump}",
+                                       f"train.init_from=checkpoints/campaign-pointmaze-{maze}-h{jump}", BW]
+
+
 BW, CC = "train.boundary_weight=3", "train.clean_context=0.5"
 SETS: dict[str, list[tuple[str, list[str]]]] = {
     # each shipped campaign model with the levers its manifest records (docs/results.md section 4)
     "campaign": [_campaign("medium", 5), _campaign("large", 5, BW), _campaign("giant", 5, BW),
                  _campaign("medium", 1, BW), _campaign("large", 1, BW, CC), _campaign("giant", 1, BW, CC)],
     "scratch": [(f"{e}-h5", [f"env={e}", "jump=5"]) for e in ENVS],
+    # the six AntMaze models; their datasets (~15 min per maze on one core) are made there by
+    # data.workers processes per maze; carry checkpoints/ant-expert with the six campaign models
+    "ant": [_ant(m, j) for j in (5, 1) for m in ("medium", "large", "giant")],
 }
 DRY = ["data.episodes=8", "data.episode_steps=301", "env.horizon=100", "data.train_window=100", "env.max_steps=100",
        "model.width=32", "model.layers=2", "model.heads=2", "model.ff=64", "train.batch_size=16",
@@ -123,7 +136,8 @@ def maze_chain(env_name: str, models: list[tuple[str, list[str]]], words: list[s
                args: argparse.Namespace, deadline: Deadline, status: dict[str, str]) -> None:
     """Make (or verify) one maze's dataset, then train its models concurrently to the deadline."""
     logs = args.runs / "logs"
-    data = start(f"data-{env_name}", [sys.executable, "jobs/make_dataset.py", f"env={env_name}", *words], env, logs)
+    data = start(f"data-{env_name}", [sys.executable, "jobs/make_dataset.py", f"env={env_name}", *words,
+                                      f"data.workers={args.data_workers}"], env, logs)
     if data.wait():
         status[f"data-{env_name}"] = "failed:\n" + tail(logs, f"data-{env_name}")
         log(f"data-{env_name} {status[f'data-{env_name}']}")
@@ -173,6 +187,8 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--train-until-s", type=float, default=470.0,
                     help="every run stops training this many seconds after the script started")
     ap.add_argument("--grace-s", type=float, default=40.0, help="a run still going this long after it is killed")
+    ap.add_argument("--data-workers", type=int, default=0,
+                    help="processes per maze's dataset (default: the cores shared among the mazes)")
     ap.add_argument("--runs", type=Path, default=REPO / "runs" / "gpu", help="training dirs (resumable)")
     ap.add_argument("--dry-run", action="store_true", help="CPU, tiny data (in --runs) and model, 2 s each")
     ap.add_argument("overrides", nargs="*", help="extra key=value words for every training run")
@@ -199,6 +215,7 @@ def main(argv: list[str]) -> int:
     for name, model_words in models:
         maze = next(w.split("=", 1)[1] for w in model_words if w.startswith("env="))
         by_maze.setdefault(maze, []).append((name, model_words))
+    args.data_workers = args.data_workers or max(1, (os.cpu_count() or 1) // len(by_maze))
     deadline, status = Deadline(t0, args.train_until_s), {}
     chains = [threading.Thread(target=maze_chain, args=(maze, ms, words, env, args, deadline, status))
               for maze, ms in by_maze.items()]

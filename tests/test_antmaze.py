@@ -83,11 +83,12 @@ def test_fall_detectors_on_hand_made_states():
 
 def test_same_config_same_bytes_other_seed_other_bytes(ant_dataset, tmp_path):
     cfg, path, manifest = ant_dataset
-    path2, manifest2 = make_dataset(ant_cfg(tmp_path), progress=False)
+    path2, manifest2 = make_dataset(ant_cfg(tmp_path, "data.workers=2"), progress=False)  # one process per episode
     for split in ("train", "val"):
         assert (path / f"{split}.npz").read_bytes() == (path2 / f"{split}.npz").read_bytes()
     strip = lambda m: {k: v for k, v in m.items() if k not in ("generation", "_generation_s")}  # noqa: E731
     assert strip(manifest) == strip(manifest2)
+    assert manifest["generation"]["workers"] == 1 and manifest2["generation"]["workers"] == 2
     _, manifest3 = make_dataset(ant_cfg(tmp_path, "data.seed=1"), progress=False)
     assert manifest3["sha256"]["train"] != manifest["sha256"]["train"]
 

@@ -15,8 +15,9 @@ from fmctd_dist.errors import ConfigError, DatasetError
 
 
 def test_same_seed_same_bytes(tiny_dataset, tmp_path):
+    """Same config, same bytes, whether one process or several (data.workers) made the episodes."""
     cfg, path = tiny_dataset
-    cfg2 = load_config(TINY_DATA + [f"data.root={tmp_path}"], method="mctd")
+    cfg2 = load_config(TINY_DATA + [f"data.root={tmp_path}", "data.workers=3"], method="mctd")
     path2, manifest2 = make_dataset(cfg2, progress=False)
     for split in ("train", "val"):
         assert (path / f"{split}.npz").read_bytes() == (path2 / f"{split}.npz").read_bytes()

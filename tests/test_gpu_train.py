@@ -50,3 +50,27 @@ def test_campaign_set_starts_from_the_shipped_campaign_weights():
 
 def test_merge_keeps_the_last_value_of_each_key():
     assert merge(["device=cuda", "train.batch_size=1024"], ["device=cpu"]) == ["device=cpu", "train.batch_size=1024"]
+
+
+def test_ant_set_dry_run_makes_its_data_with_workers_and_fine_tunes(tmp_path):
+    """The ant set's chain on CPU: the tiny ant dataset made by 2 worker processes, one model packed."""
+    out = tmp_path / "out"
+    cmd = [sys.executable, "jobs/gpu_train.py", str(out), "--dry-run", "--set", "ant", "--only", "antmaze-medium-h5",
+           "--data-workers", "2", "--runs", str(tmp_path / "runs")]
+    done = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=600,
+                          env={**os.environ, "OMP_NUM_THREADS": "1"})
+    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
+    with tarfile.open(out / "antmaze-medium-h5.tar") as tar:
+        manifest = json.load(tar.extractfile("antmaze-medium-h5/manifest.json"))
+    assert manifest["config"]["env"]["name"] == "antmaze-medium" and manifest["config"]["train"]["boundary_weight"] == 3.0
+    data = json.loads(next((tmp_path / "runs" / "data").glob("antmaze-medium-*/manifest.json")).read_text())
+    assert data["generation"]["workers"] == 2
+
+
+def test_ant_set_starts_from_the_campaign_pointmaze_weights_and_needs_the_expert():
+    assert len(SETS["ant"]) == 6
+    for name, words in SETS["ant"]:
+        point = name.replace("antmaze", "pointmaze")
+        assert f"train.init_from=checkpoints/campaign-{point}" in words and f"env={name.rsplit('-h', 1)[0]}" in words
+        assert (REPO / "checkpoints" / f"campaign-{point}" / "manifest.json").exists()
+    assert (REPO / "checkpoints" / "ant-expert").is_dir()

@@ -94,7 +94,8 @@ def test_config_defaults_keep_their_meaning():
 
 def test_config_hash_ignores_where_the_grid_runs_but_not_the_plan():
     base = config_hash(load_config([]))
-    assert config_hash(load_config(["eval.run=x", "ray.denoiser_actors=2", "seeds=[3]", "eval.threads=1"])) == base
+    assert config_hash(load_config(["eval.run=x", "ray.denoiser_actors=2", "seeds=[3]", "eval.threads=1",
+                                    "data.workers=4"])) == base
     assert config_hash(load_config(["method.parallel=50"])) != base
     assert config_hash(load_config(["eval.episode_time_limit=60"])) != base
 

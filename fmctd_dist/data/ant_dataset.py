@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -78,6 +79,16 @@ def split_stats(obs: np.ndarray, reached: np.ndarray, dt: float) -> dict[str, An
     }
 
 
+def ant_episodes(cfg: Config) -> tuple[Callable[[np.random.Generator], dict[str, np.ndarray]], Callable[[], None]]:
+    """The episode function (one env, expert and oracle per process) and the env's close."""
+    from fmctd_dist.ant.expert import load_expert  # deferred: torch
+
+    env = AntMaze(cfg.env.name)
+    expert = load_expert(resolve_path(cfg.data.expert))
+    oracle = NoisyOracle(env.geometry, 0.0)  # only its noiseless direction is used; the noise goes on the torques
+    return (lambda rng: generate_episode(env, expert, oracle, cfg.data.episode_steps, cfg.data.noise, rng)), env.close
+
+
 class AntSource:
     """AntMaze data source for :func:`fmctd_dist.data.dataset.make_dataset` (loads and checks the expert first)."""
 
@@ -90,24 +101,19 @@ class AntSource:
         self.expert = load_expert(resolve_path(cfg.data.expert))  # CheckpointError: missing, other kind, corrupt
         self.stats: dict[str, dict[str, Any]] = {}
         self.wall_s: dict[str, float] = {}
+        env = AntMaze(cfg.env.name)
+        self.dt = env.dt  # the stats' speed; the episodes build their own envs (one per worker process)
+        env.close()
 
     def generate(self, split: str, episodes: int, progress: bool) -> dict[str, np.ndarray]:
         from fmctd_dist.device import torch_threads
 
-        cfg = self.cfg
-        env = AntMaze(cfg.env.name)
-        oracle = NoisyOracle(env.geometry, 0.0)  # only its noiseless direction is used; the noise goes on the torques
         t0 = time.perf_counter()
         with torch_threads(1):
-            arrays = run_episodes(
-                cfg, split, episodes,
-                lambda rng: generate_episode(env, self.expert, oracle, cfg.data.episode_steps, cfg.data.noise, rng),
-                progress,
-            )
+            arrays = run_episodes(self.cfg, split, episodes, ant_episodes, progress)
         self.wall_s[split] = time.perf_counter() - t0
         reached = arrays.pop("reached")
-        self.stats[split] = split_stats(arrays["observations"], reached, env.dt)
-        env.close()
+        self.stats[split] = split_stats(arrays["observations"], reached, self.dt)
         return arrays
 
     def manifest_fields(self) -> dict[str, Any]:
@@ -129,7 +135,7 @@ class AntSource:
             "healthy_z": list(HEALTHY_Z),  # stats: "unhealthy" = torso z outside this range
             # the only field that differs between two runs of the same config (the .npz bytes do not)
             "generation": {"wall_s": round(wall, 1), "env_steps_per_s": round(steps / max(wall, 1e-9), 1),
-                           "torch_threads": 1},
+                           "torch_threads": 1, "workers": self.cfg.data.workers},
         }
 
 

@@ -6,12 +6,13 @@ ant); the start / goal draws and the episode loop are :mod:`fmctd_dist.data.navi
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
 from fmctd_dist.config import Config
-from fmctd_dist.data.navigate_episodes import random_goal, random_start, run_episodes
+from fmctd_dist.data.navigate_episodes import Episode, random_goal, random_start, run_episodes
 from fmctd_dist.data.oracle import NoisyOracle
 from fmctd_dist.envs.maze import MazeGeometry
 from fmctd_dist.envs.pointmaze import GOAL_TOLERANCE, PointMaze
@@ -40,14 +41,16 @@ def generate_episode(env: PointMaze, oracle: NoisyOracle, steps: int,
     return {"observations": obs, "actions": act, "goals": goals}
 
 
-def generate_split(cfg: Config, split: str, episodes: int, progress: bool = True) -> dict[str, np.ndarray]:
+def point_episodes(cfg: Config) -> tuple[Episode, Callable[[], None]]:
+    """The episode function (one env and oracle per process) and the env's close."""
     env = PointMaze(cfg.env.name)
     env.reset(1, cfg.data.seed)  # initialise MuJoCo state; positions are then set per episode
     oracle = NoisyOracle(env.geometry, cfg.data.noise)
-    arrays = run_episodes(cfg, split, episodes,
-                          lambda rng: generate_episode(env, oracle, cfg.data.episode_steps, rng), progress)
-    env.close()
-    return arrays
+    return (lambda rng: generate_episode(env, oracle, cfg.data.episode_steps, rng)), env.close
+
+
+def generate_split(cfg: Config, split: str, episodes: int, progress: bool = True) -> dict[str, np.ndarray]:
+    return run_episodes(cfg, split, episodes, point_episodes, progress)
 
 
 class PointSource:

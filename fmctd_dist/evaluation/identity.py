@@ -2,7 +2,7 @@
 
 A row is only comparable with rows of the same *identity*: the config fields that shape a
 plan and the checkpoint digest. The hash covers every field except where and how the grid is
-run (``ray.*`` and ``eval.*`` but ``eval.episode_time_limit``, which decides time-outs), and it
+run (``ray.*``, ``data.workers``, and ``eval.*`` but ``eval.episode_time_limit``, which decides time-outs), and it
 is taken over the fields that differ from their defaults, so adding a config field (with a
 default that keeps the old behaviour) does not orphan earlier results. Changing what a default
 *means* must bump :data:`CONFIG_SCHEMA`; ``tests/golden/config_defaults.json`` fails the tests
@@ -20,6 +20,7 @@ from fmctd_dist.config import Config
 
 CONFIG_SCHEMA = 1  # bump when a config default changes meaning (tests/golden/config_defaults.json)
 RUN_ONLY = ("ray",)  # sections that say where a grid runs, never what a plan is
+RUN_ONLY_FIELDS = ("data.workers",)  # fields that say how something is made, never what
 EVAL_PLAN_FIELDS = ("episode_time_limit",)  # eval.* fields that change a row's outcome
 # Row columns that say which settings made a row: compared when a row predates ``config_json``.
 KNOB_COLUMNS = ("parallel", "virtual_weight", "redundancy_aware", "leaf_parallel", "jump", "budget",
@@ -40,7 +41,7 @@ def plan_fields(cfg: Config) -> dict[str, Any]:
     """Dotted key -> value of every field that shapes a plan or a row's outcome."""
     flat = _flat(dataclasses.asdict(cfg))
     return {k: v for k, v in flat.items()
-            if k.split(".")[0] not in RUN_ONLY
+            if k.split(".")[0] not in RUN_ONLY and k not in RUN_ONLY_FIELDS
             and (not k.startswith("eval.") or k.split(".", 1)[1] in EVAL_PLAN_FIELDS)}
 
 
