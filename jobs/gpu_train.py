@@ -3,6 +3,7 @@
     python3 jobs/gpu_train.py OUT_DIR                           # the H200 device: --set campaign, ~8.5 min
     python3 jobs/gpu_train.py OUT_DIR --set scratch             # the three sparse models from scratch (paper recipe)
     python3 jobs/gpu_train.py OUT_DIR --set ant                 # the six AntMaze models from the campaign ones
+    python3 jobs/gpu_train.py OUT_DIR --set visual              # the four visual latent models (carried stores)
     python3 jobs/gpu_train.py OUT_DIR --train-until-s 300 train.precision=bf16   # extra words go to every run
     python3 jobs/gpu_train.py OUT_DIR --dry-run                 # CPU: tiny data and model, seconds (tested)
 
@@ -25,7 +26,8 @@ is importable:
    (checkpoints/campaign-pointmaze-{medium,large,giant}-h{5,1}, carried) with each one's own
    recipe levers (the boundary loss, the clean context); ``scratch`` trains the three sparse ones
    from scratch with the paper's recipe; ``ant`` fine-tunes the six AntMaze models from the same
-   carried campaign models (carry checkpoints/ant-expert too: its actions make the ant data).
+   carried campaign models (carry checkpoints/ant-expert too: its actions make the ant data);
+   ``visual`` trains the visual maze's latent models on carried latent stores (no rendering there).
 4. output: one OUT_DIR/<name>.tar per model (its model.pt + manifest.json, and the half-way
    snapshot's; < 16 MiB for the 6 x 128 model) and OUT_DIR/train_logs.txt with each run's last
    lines and each dataset's sha256: at most 7 files, inside the device tool's 8. A run that
@@ -68,6 +70,13 @@ def _ant(maze: str, jump: int) -> tuple[str, list[str]]:
                                        f"train.init_from=checkpoints/campaign-pointmaze-{maze}-h{jump}", BW]
 
 
+def _visual(maze: str, jump: int) -> tuple[str, list[str]]:
+    """A visual-maze latent model continued (h5) or started (h1) from the shipped sparse one, on the carried
+    100-episode latent store (data/visual-pointmaze-<maze>-latents-...-n100-...; section 13.4), boundary loss on."""
+    return f"visual-pointmaze-{maze}-h{jump}", [f"env=visual-pointmaze-{maze}", f"jump={jump}", "visual.episodes=100",
+                                                f"train.init_from=checkpoints/visual-pointmaze-{maze}-h5", BW]
+
+
 BW, CC = "train.boundary_weight=3", "train.clean_context=0.5"
 SETS: dict[str, list[tuple[str, list[str]]]] = {
     # each shipped campaign model with the levers its manifest records (docs/results.md section 4)
@@ -77,7 +86,11 @@ SETS: dict[str, list[tuple[str, list[str]]]] = {
     # the six AntMaze models; their datasets (~15 min per maze on one core) are made there by
     # data.workers processes per maze; carry checkpoints/ant-expert with the six campaign models
     "ant": [_ant(m, j) for j in (5, 1) for m in ("medium", "large", "giant")],
+    # the four visual latent models; nothing is rendered there: carry each maze's VAE
+    # (checkpoints/visual-pointmaze-<maze>-vae), its latent store and its shipped -h5 model
+    "visual": [_visual(m, j) for j in (5, 1) for m in ("medium", "large")],
 }
+CARRIED_DATA = ("visual-",)  # env families whose data is carried (made on a CPU machine), never generated here
 DRY = ["data.episodes=8", "data.episode_steps=301", "env.horizon=100", "data.train_window=100", "env.max_steps=100",
        "model.width=32", "model.layers=2", "model.heads=2", "model.ff=64", "train.batch_size=16",
        "train.val_batches=1", "train.warmup=10", "device=cpu", "train.threads=1"]
@@ -132,17 +145,24 @@ class Deadline:
         return max(30.0, self.until_s - (time.time() - self.t0) - START_MARGIN_S)
 
 
+def data_step(env_name: str, words: list[str], env: dict[str, str], args: argparse.Namespace, logs: Path) -> str:
+    """'ok' once the maze's dataset exists (made here, or carried for CARRIED_DATA), else what failed."""
+    if env_name.startswith(CARRIED_DATA):
+        return "ok"  # each training run checks its carried store against its VAE, with one clear error
+    cmd = [sys.executable, "jobs/make_dataset.py", f"env={env_name}", *words, f"data.workers={args.data_workers}"]
+    if start(f"data-{env_name}", cmd, env, logs).wait():
+        return "failed:\n" + tail(logs, f"data-{env_name}")
+    return "ok"
+
+
 def maze_chain(env_name: str, models: list[tuple[str, list[str]]], words: list[str], env: dict[str, str],
                args: argparse.Namespace, deadline: Deadline, status: dict[str, str]) -> None:
     """Make (or verify) one maze's dataset, then train its models concurrently to the deadline."""
     logs = args.runs / "logs"
-    data = start(f"data-{env_name}", [sys.executable, "jobs/make_dataset.py", f"env={env_name}", *words,
-                                      f"data.workers={args.data_workers}"], env, logs)
-    if data.wait():
-        status[f"data-{env_name}"] = "failed:\n" + tail(logs, f"data-{env_name}")
+    status[f"data-{env_name}"] = data_step(env_name, words, env, args, logs)
+    if status[f"data-{env_name}"] != "ok":
         log(f"data-{env_name} {status[f'data-{env_name}']}")
         return
-    status[f"data-{env_name}"] = "ok"
     budget = 2.0 if args.dry_run else deadline.budget()
     log(f"data-{env_name} ready after {time.time() - deadline.t0:.0f}s; its models get {budget:.0f}s each")
     timing = [f"train.time_budget_s={budget:.0f}", f"train.snapshot_every_s={budget / 2:.0f}"]

@@ -5,6 +5,7 @@ with our ant expert steered by that oracle.
     python jobs/make_dataset.py env=pointmaze-medium data.seed=1 data.root=/tmp/data
     python jobs/make_dataset.py env=antmaze-medium                      # expert: data.expert
     python jobs/make_dataset.py env=antmaze-medium data.episodes=20 data.root=/tmp/data   # a small look
+    python jobs/make_dataset.py env=antmaze-large data.workers=2       # 2 processes, the same bytes
     python jobs/make_dataset.py env=cube-single                         # OGBench's CubePlanOracle play data
 
 Nothing is downloaded. The same config (and, for AntMaze, the same expert) always writes the

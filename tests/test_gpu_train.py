@@ -9,6 +9,8 @@ import sys
 import tarfile
 from pathlib import Path
 
+import pytest
+
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO / "jobs"))
 
@@ -74,3 +76,31 @@ def test_ant_set_starts_from_the_campaign_pointmaze_weights_and_needs_the_expert
         assert f"train.init_from=checkpoints/campaign-{point}" in words and f"env={name.rsplit('-h', 1)[0]}" in words
         assert (REPO / "checkpoints" / f"campaign-{point}" / "manifest.json").exists()
     assert (REPO / "checkpoints" / "ant-expert").is_dir()
+
+
+N20_STORE = sorted((REPO / "data").glob("visual-pointmaze-medium-latents-seed0-n20-*/latents.npz"))
+
+
+@pytest.mark.skipif(not N20_STORE, reason="no 20-episode visual-medium latent store in data/ (section 13.3 makes it)")
+def test_visual_set_dry_run_trains_on_a_carried_store_without_making_data(tmp_path):
+    """The visual chain makes no dataset (the store is carried) and trains on the latents; the words after
+    the options (here the 20-episode store and the repo's data root) override the set's."""
+    out = tmp_path / "out"
+    cmd = [sys.executable, "jobs/gpu_train.py", str(out), "--dry-run", "--set", "visual", "--only",
+           "visual-pointmaze-medium-h5", "--runs", str(tmp_path / "runs"), "visual.episodes=20", f"data.root={REPO / 'data'}"]
+    done = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=600,
+                          env={**os.environ, "OMP_NUM_THREADS": "1"})
+    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
+    with tarfile.open(out / "visual-pointmaze-medium-h5.tar") as tar:
+        manifest = json.load(tar.extractfile("visual-pointmaze-medium-h5/manifest.json"))
+    assert manifest["config"]["env"]["name"] == "visual-pointmaze-medium" and manifest["token_dim"] == 80
+    assert manifest["latents"]["vae_digest"] and not (tmp_path / "runs" / "logs" / "data-visual-pointmaze-medium.log").exists()
+
+
+def test_visual_set_continues_the_shipped_visual_models():
+    assert [n for n, _ in SETS["visual"]] == ["visual-pointmaze-medium-h5", "visual-pointmaze-large-h5",
+                                              "visual-pointmaze-medium-h1", "visual-pointmaze-large-h1"]
+    for name, words in SETS["visual"]:
+        maze = name.rsplit("-h", 1)[0]
+        assert f"train.init_from=checkpoints/{maze}-h5" in words and "visual.episodes=100" in words
+        assert (REPO / "checkpoints" / f"{maze}-h5" / "manifest.json").exists()
