@@ -8,7 +8,7 @@ returns the episode function.
 
 Every episode draws only from its own seeded stream and starts from a full reset of the robot,
 so episodes are independent: ``data.workers`` processes generate contiguous chunks of them and
-the stacked arrays are the same bytes as one process's (``tests/test_data_workers.py``). That is
+the stacked arrays are the same bytes as one process's (``test_dataset.py``, ``test_antmaze.py``). That is
 what makes the AntMaze datasets (~15 min per maze on one core) cheap on a many-core machine.
 """
 
