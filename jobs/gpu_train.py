@@ -58,6 +58,9 @@ TAR_LIMIT = 16 * 2**20  # the device tool's per-file limit
 START_MARGIN_S = 45.0  # a run's start (imports, CUDA, data) and its last checkpoint, outside its budget
 
 
+BW, CC = "train.boundary_weight=3", "train.clean_context=0.5"  # the recipe levers the sets name
+
+
 def _campaign(maze: str, jump: int, *levers: str) -> tuple[str, list[str]]:
     name = f"pointmaze-{maze}-h{jump}"
     return name, [f"env=pointmaze-{maze}", f"jump={jump}", f"train.init_from=checkpoints/campaign-{name}", *levers]
@@ -77,7 +80,6 @@ def _visual(maze: str, jump: int) -> tuple[str, list[str]]:
                                                 f"train.init_from=checkpoints/visual-pointmaze-{maze}-h5", BW]
 
 
-BW, CC = "train.boundary_weight=3", "train.clean_context=0.5"
 SETS: dict[str, list[tuple[str, list[str]]]] = {
     # each shipped campaign model with the levers its manifest records (docs/results.md section 4)
     "campaign": [_campaign("medium", 5), _campaign("large", 5, BW), _campaign("giant", 5, BW),
