@@ -127,7 +127,7 @@ def do_arm(args: argparse.Namespace, arm: Arm, arms: dict[str, Arm]) -> dict[str
     words = arm_words(args, arm, arms)
     if arm.base is None and not finished(ckpt, args.budget_s):
         train_words = merge([RUN_FOREVER], words, [f"train.out={ckpt}", f"train.time_budget_s={args.budget_s}",
-                                                     "train.threads=1"])
+                                                    "train.threads=1"])
         wall, cpu = run_logged([sys.executable, "jobs/train.py", *train_words], out / "train.log")
         (out / "train_process.json").write_text(json.dumps({"wall_s": wall, "cpu_s": cpu}) + "\n")
         tqdm.write(f"[{arm.name}] trained in {wall:.0f}s, {cpu:.0f} CPU s (log {out / 'train.log'})")
@@ -182,8 +182,8 @@ def evaluate(args: argparse.Namespace) -> None:
     method = "fast-mctd" if cfg.jump > 1 else "p-mctd"  # a dense (H=1) arm searches as P-MCTD, the paper's dense twin
     row["search_method"] = method
     grid = merge(words, [f"method={method}", "runner=local", f"tasks=[{args.tasks}]", f"seeds=[{args.seeds}]",
-                          "eval.threads=1", f"eval.run={run}", f"eval.out={args.results_out}",
-                          f"eval.episode_time_limit={args.episode_limit_s}"])
+                         "eval.threads=1", f"eval.run={run}", f"eval.out={args.results_out}",
+                         f"eval.episode_time_limit={args.episode_limit_s}"])
     t0 = time.time()
     subprocess.run([sys.executable, "jobs/eval.py", *grid], cwd=REPO, check=True)
     files = sorted((REPO / args.results_out / run / method / cfg.env.name).glob("task=*/seed=*.parquet"))

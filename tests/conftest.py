@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import importlib.util
 import os
+import sys
 from pathlib import Path
 from types import ModuleType
 
@@ -28,7 +29,10 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
 
 
 def load_job(name: str) -> ModuleType:
-    """A script under jobs/ (not a package) imported as a module, so tests call its functions."""
+    """A script under jobs/ (not a package) imported as a module, so tests call its functions. Its folder
+    goes on sys.path, as when Python runs it, so its imports of sibling scripts (cli_words) resolve."""
+    if str(JOBS) not in sys.path:
+        sys.path.insert(0, str(JOBS))
     spec = importlib.util.spec_from_file_location(name, JOBS / f"{name}.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)

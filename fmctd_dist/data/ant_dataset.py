@@ -17,15 +17,15 @@ and per-episode seeding :mod:`fmctd_dist.data.navigate_episodes`'s.
 from __future__ import annotations
 
 import time
-from pathlib import Path
 from collections.abc import Callable
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from fmctd_dist.ant.direction_env import expert_input
 from fmctd_dist.config import Config, resolve_path
-from fmctd_dist.data.navigate_episodes import random_goal, random_start, run_episodes
+from fmctd_dist.data.navigate_episodes import Episode, random_goal, random_start, run_episodes
 from fmctd_dist.data.oracle import NoisyOracle
 from fmctd_dist.envs.antmaze import ACT_DIM, GOAL_TOLERANCE, HEALTHY_Z, OBS_DIM, AntMaze, healthy, upright
 from fmctd_dist.errors import DatasetError
@@ -79,7 +79,7 @@ def split_stats(obs: np.ndarray, reached: np.ndarray, dt: float) -> dict[str, An
     }
 
 
-def ant_episodes(cfg: Config) -> tuple[Callable[[np.random.Generator], dict[str, np.ndarray]], Callable[[], None]]:
+def ant_episodes(cfg: Config) -> tuple[Episode, Callable[[], None]]:
     """The episode function (one env, expert and oracle per process) and the env's close."""
     from fmctd_dist.ant.expert import load_expert  # deferred: torch
 
