@@ -9,7 +9,9 @@ Reads the run ``main`` (the maze tables: every method x PointMaze / AntMaze maze
 rewrites only the blocks between ``<!-- report:NAME -->`` markers. Runs cited by hand-written
 sections (cubes, visual maze, recipe and option benches: ``ARCHIVED``) are not tabulated here but
 their rows are archived with the rest; the one exception is the robot table (block ``robot``):
-every archived cube episode whose config hash is today's default for its method and env. An episode
+every archived cube episode whose config hash is today's default for its method and env. The block
+``glance`` at the doc's top, where the doc has one, puts one success cell per method x env of those
+tables beside the paper's. An episode
 re-run with another identity (retrained weights at the same path) keeps its earlier row in the archive,
 under run ``superseded/<run>@<config>-<ckpt>``, out of the tables. Also writes
 ``docs/eval_rows.parquet``: every row without its plan/trajectory arrays, so each number in the
@@ -32,8 +34,8 @@ from fmctd_dist.envs import maze_geometry
 from fmctd_dist.evaluation.identity import config_hash
 from fmctd_dist.evaluation.plots import plot_ablation, plot_episode, plot_success_vs_time
 from fmctd_dist.evaluation.report import ABLATIONS, ANT_ENV_ORDER, CUBE_ENV_ORDER, CUBE_METHOD_ORDER, ENV_ORDER, \
-    METHOD_ORDER, ablation_summary, ablation_table, current_rows, fill_markers, load_rows, maze_table, \
-    merge_rows, row_key, superseded
+    METHOD_ORDER, ablation_summary, ablation_table, current_rows, fill_markers, glance_table, load_rows, \
+    maze_table, merge_rows, row_key, superseded
 from fmctd_dist.evaluation.results import summarise
 from fmctd_dist.errors import ConfigError
 
@@ -120,7 +122,13 @@ def main(argv: list[str]) -> int:
     if robot:
         sections["robot"] = maze_table(robot, CUBE_ENV_ORDER, CUBE_METHOD_ORDER, dropped, shipped)
 
-    text = fill_markers(doc.read_text(), sections)
+    # the at-a-glance block at the top of the doc: the maze and robot lines above, one success cell each
+    text = doc.read_text()
+    if "<!-- report:glance -->" in text:
+        glance_envs = ENV_ORDER + ANT_ENV_ORDER + CUBE_ENV_ORDER
+        sections["glance"] = glance_table(main_rows + robot, glance_envs,
+                                          {**shipped_digests(ENV_ORDER + ANT_ENV_ORDER, METHOD_ORDER), **shipped})
+    text = fill_markers(text, sections)
     doc.write_text(text)
     if all_rows:
         keys = [k for k in dict.fromkeys(k for r in all_rows for k in r) if k not in TRAJECTORIES]

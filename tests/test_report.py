@@ -3,7 +3,7 @@
 import pytest
 
 from fmctd_dist.evaluation.report import ABLATIONS, ANT_ENV_ORDER, CUBE_ENV_ORDER, CUBE_METHOD_ORDER, ablation_summary, \
-    ablation_table, current_rows, fill_markers, load_rows, maze_table, merge_rows
+    ablation_table, current_rows, fill_markers, glance_table, load_rows, maze_table, merge_rows
 from fmctd_dist.evaluation.results import ResultStore
 
 
@@ -227,3 +227,23 @@ def test_ablation_lines_on_weights_no_longer_shipped_say_so():
     assert "| 10 | fast-mctd / giant (older weights aaaaaaaa) | 2 (2 x 1) |" in table
     assert "| 200 | fast-mctd / giant | 2 (2 x 1) |" in table
     assert "older weights" not in ablation_table(ab, rows)  # nothing known about what is shipped
+
+
+def test_glance_table_shows_todays_largest_line_per_cell_beside_the_paper():
+    """One cell per (method, env): the line on today's weights with the most episodes, a count when under 50,
+    a dagger when every line is on replaced weights, '–' for what was not run; cube envs take the replanning row."""
+    def r(task, seed, ok, method, env, digest):
+        return {**row(task, seed, ok, method=method, env=env), "config_hash": "c" * 16, "checkpoint_digest": digest,
+                "episode_time_limit": 0.0}
+
+    rows = ([r(k, s, k != 5 or s < 6, "fast-mctd", "pointmaze-giant", "new") for k in range(1, 6) for s in range(10)]
+            + [r(k, 0, False, "fast-mctd", "pointmaze-giant", "old") for k in range(1, 6)]  # older and smaller: not shown
+            + [r(k, s, True, "s-mctd", "pointmaze-giant", "old") for k in (1, 2) for s in (0, 1)]
+            + [r(1, 0, True, "fast-mctd-replan", "cube-single", "new")])
+    shipped = {("fast-mctd", "pointmaze-giant"): "new", ("s-mctd", "pointmaze-giant"): "new",
+               ("fast-mctd-replan", "cube-single"): "new"}
+    table = glance_table(rows, ["pointmaze-giant", "cube-single"], shipped)
+    assert table.splitlines()[0] == "| method | point giant | cube single |"
+    assert "| fast-mctd (fast-mctd-replan on cubes) | 92 / 100 | 100 (1) / 100 |" in table
+    assert "| s-mctd (s-mctd-replan on cubes) | 100 (4) † / 100 | – / 100 |" in table
+    assert "| mctd (mctd-replan on cubes) | – / 100 | – / 100 |" in table

@@ -193,6 +193,50 @@ def maze_table(rows: list[dict[str, Any]], envs: list[str] = ENV_ORDER, methods:
     return "\n".join(lines)
 
 
+# the at-a-glance table's rows: a maze method and the replanning method the robot table puts in its place
+GLANCE_ROWS = [("diffuser", "diffuser"), ("diffuser-replan", "diffuser-replan"),
+               ("diffusion-forcing", "diffusion-forcing"), ("mctd", "mctd-replan"), ("p-mctd", "p-mctd-replan"),
+               ("s-mctd", "s-mctd-replan"), ("fast-mctd", "fast-mctd-replan")]
+
+
+def _glance_line(lines: list[dict[str, Any]], shipped: str | None) -> tuple[dict[str, Any], bool]:
+    """The line a cell shows: on today's weights if any is, then the one with the most episodes; and
+    whether it is on today's weights."""
+    today = [s for s in lines if not shipped or str(s.get("checkpoint_digest")) == shipped]
+    pool = today or lines
+    return max(pool, key=lambda s: s["episodes"]), bool(today)
+
+
+def glance_table(rows: list[dict[str, Any]], envs: list[str],
+                 shipped: dict[tuple[str, str], str] | None = None) -> str:
+    """One cell per (method, env): our success % against the paper's, e.g. ``84 / 100``, from the same
+    lines as the full tables (:func:`maze_table`); ``envs`` in column order (cube envs take the
+    replanning method of their row). A (method, env) with several lines shows the one on today's
+    weights with the most episodes; ``†`` marks a cell whose lines are all on replaced weights,
+    ``(n)`` a line of fewer than 50 episodes. For reading at a glance only: the full tables say
+    which config, seeds and planning times each number has."""
+    summary = summarise(rows)
+    key: dict[tuple[str, str], list[dict[str, Any]]] = {}
+    for s in summary:
+        key.setdefault((s["method"], s["env"]), []).append(s)
+    short = [e.replace("pointmaze-", "point ").replace("antmaze-", "ant ").replace("cube-", "cube ") for e in envs]
+    lines = ["| method | " + " | ".join(short) + " |", "|---" * (len(envs) + 1) + "|"]
+    for maze_m, cube_m in GLANCE_ROWS:
+        cells = []
+        for env in envs:
+            m = cube_m if env.startswith("cube-") else maze_m
+            paper = paper_cell(m, env).split(" ", 1)[0]
+            if (m, env) not in key:
+                cells.append(f"– / {paper}")
+                continue
+            s, today = _glance_line(key[(m, env)], (shipped or {}).get((m, env)))
+            few = f" ({s['episodes']})" if s["episodes"] < 50 else ""
+            cells.append(f"{s['success']:.0f}{few}{'' if today else ' †'} / {paper}")
+        name = maze_m if maze_m == cube_m else f"{maze_m} ({cube_m} on cubes)"
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
 def _env_rank(env: str) -> tuple[int, str]:
     return (ENV_NAMES.index(env) if env in ENV_NAMES else len(ENV_NAMES), env)
 
