@@ -339,7 +339,7 @@ class RayConfig:
     micro_batch: int = spec(8, gt=0, why="M: jobs per denoiser call (fixed shapes -> determinism); raise on GPUs")
     num_gpus: float = spec(0.0, ge=0, why="GPUs per denoiser actor (needs device=cuda)")
     num_cpus: float = spec(1.0, ge=0, why="CPUs per denoiser actor")
-    call_timeout_s: float = spec(300.0, gt=0, why="a micro-batch slower than this is re-routed")
+    call_timeout_s: float = spec(300.0, gt=0, why="a call slower than this per micro-batch it holds is re-routed")
     max_restarts: int = spec(3, ge=0, why="restarts per denoiser actor, and re-runs per episode whose env actor or "
                                          "driver died; 0 = neither (a dead actor's micro-batches are still re-routed)")
 

@@ -95,6 +95,7 @@ def test_ray_denoiser_matches_local_bitwise(prepared, pools):
     got = pools(2).denoiser().denoise(batch)
     assert np.array_equal(got.x, want.x) and np.array_equal(got.x0, want.x0)
     assert got.retries == 0 and got.denoise_time_s > 0 and got.stats["micro_batches"] == 3
+    assert got.stats["calls"] == 2 and got.stats["actors_used"] == 2  # one segment per actor (design §5)
 
 
 def test_ray_denoiser_matches_local_bitwise_when_the_ladder_renoises(prepared, pools):

@@ -20,7 +20,7 @@ from fmctd_dist.planners import make_planner
 pytestmark = [pytest.mark.ray, pytest.mark.usefixtures("one_torch_thread")]
 
 SEARCH = ["method=p-mctd", "method.parallel=8", "method.budget=24", "method.early_stop=false",
-          "method.warp_threshold=1000", "ray.micro_batch=2"]  # 4 micro-batches per call: some always queued
+          "method.warp_threshold=1000", "ray.micro_batch=2"]  # up to 4 micro-batches a batch, a segment per actor
 START, GOAL = np.array([0.0, 0.0]), np.array([20.0, 20.0])
 
 
@@ -31,7 +31,8 @@ def prepared_with(tiny_checkpoint, *extra):
 
 
 class KillingDenoiser(RayDenoiser):
-    """Kills actor 0 (Ray restarts it) right after the n-th micro-batch is submitted."""
+    """Kills actor 0 (Ray restarts it) right after a segment is submitted to it, from the n-th segment on:
+    that segment is in flight when its actor dies."""
 
     def __init__(self, *args, kill_at: int, **kw):
         super().__init__(*args, **kw)
@@ -40,7 +41,7 @@ class KillingDenoiser(RayDenoiser):
     def _submit(self, s):
         ref = super()._submit(s)
         self.submitted += 1
-        if self.submitted == self.kill_at:
+        if self.submitted >= self.kill_at and not self.killed and s.actor == 0:
             ray.kill(self.actors[0], no_restart=False)
             self.killed += 1
         return ref
@@ -56,10 +57,10 @@ def test_actor_killed_mid_batch_gives_identical_plan(tiny_checkpoint, ray_cluste
     ref, ref_tree = plan(p, LocalDenoiser.from_checkpoint(p.checkpoint, p.cfg))
     pool = DenoiserPool.create(p, 2)
     try:
-        den = KillingDenoiser(pool.actors, 2, call_timeout_s=60, max_restarts=3, kill_at=6)  # 2nd call, 2nd shard
+        den = KillingDenoiser(pool.actors, 2, call_timeout_s=60, max_restarts=3, kill_at=4)  # from the 2nd batch on
         out, tree = plan(p, den)
         assert den.killed == 1
-        assert out.retries > 0, "the killed actor's micro-batches should have been re-run"
+        assert out.retries > 0, "the killed actor's segment should have been re-run"
         assert np.array_equal(out.waypoints, ref.waypoints) and out.expansions == ref.expansions
         n = ref_tree.num_nodes
         assert tree.num_nodes == n and np.array_equal(tree.x[:n], ref_tree.x[:n])
@@ -92,7 +93,7 @@ def test_all_actors_killed_mid_batch(tiny_checkpoint, ray_cluster):
     class KillAll(RayDenoiser):
         def _submit(self, s):
             ref = super()._submit(s)
-            if s.index == 3:  # every micro-batch of the first call is out: kill both actors
+            if s.index == 1:  # both segments of a batch are out: kill both actors
                 for a in self.actors:
                     ray.kill(a, no_restart=True)
             return ref
@@ -110,7 +111,7 @@ def test_all_actors_killed_mid_batch(tiny_checkpoint, ray_cluster):
 class HungActor:
     """Never answers a denoise call (a wedged GPU, a stuck node)."""
 
-    def denoise(self, batch):
+    def denoise(self, batch, micro_batch):
         time.sleep(600)
 
 

@@ -55,10 +55,13 @@ class LocalDenoiser:
         return cls(model, cfg.diffusion, device or cfg.device, micro_batch or cfg.ray.micro_batch, manifest["digest"],
                    guide_map_for(cfg, manifest))
 
-    def denoise(self, batch: DenoiseBatch) -> DenoiseResult:
-        """x_out, x0 [B, T, D] float32 for B jobs; denoise_time_s = wall time of the model work."""
+    def denoise(self, batch: DenoiseBatch, micro_batch: int | None = None) -> DenoiseResult:
+        """x_out, x0 [B, T, D] float32 for B jobs; denoise_time_s = wall time of the model work.
+
+        ``micro_batch`` overrides this denoiser's cut for one call: a Ray actor runs a segment with the
+        cut of the pool that sent it, so the model sees the same shapes as in any other run."""
         self._check(batch)
-        b, m = batch.size, self.micro_batch
+        b, m = batch.size, micro_batch or self.micro_batch
         xs, x0s, seconds, calls, padded = [], [], 0.0, {}, 0
         for lo, idx in zip(range(0, b, m), micro_batch_indices(b, m)):
             pad = lo + m - min(lo + m, b)

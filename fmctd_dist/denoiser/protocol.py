@@ -71,7 +71,7 @@ class DenoiseResult:
     x: np.ndarray
     x0: np.ndarray
     denoise_time_s: float = 0.0  # wall time inside the model calls (summed over micro-batches)
-    retries: int = 0  # micro-batches re-run after a failure (Ray pool only)
+    retries: int = 0  # calls (segments of micro-batches) re-run after a failure (Ray pool only)
     stats: dict = field(default_factory=dict)
 
 

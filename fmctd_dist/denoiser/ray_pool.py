@@ -3,10 +3,13 @@
 A batch is cut in job order into micro-batches of exactly M = ``ray.micro_batch`` jobs (the
 last one padded, :func:`micro_batch_indices`, the same cut as :class:`LocalDenoiser`), so
 every model call has the same shapes with 1 actor, N actors or no Ray, and plans are bitwise
-equal on CPU. Micro-batches are sharded least-loaded over the actors and gathered with
-``ray.wait``; a micro-batch whose actor died or timed out is re-run on another live actor
-(denoise jobs are idempotent) and counted in ``DenoiseResult.retries``. When no live actor
-is left, one :class:`DeviceError` is raised -- never a hang.
+equal on CPU. The micro-batches are then grouped, in order, into one contiguous segment per live
+actor, and each segment is one call (design §5: segment-sized calls, one per actor for each
+expansion / simulation batch); the actor's LocalDenoiser cuts it back into the same micro-batches.
+Segments go least-loaded over the actors and are gathered with ``ray.wait``; a segment whose
+actor died or did not answer within ``ray.call_timeout_s`` per micro-batch it holds is re-run on
+another live actor (denoise jobs are idempotent) and counted in ``DenoiseResult.retries``. When
+no live actor is left, one :class:`DeviceError` is raised -- never a hang.
 
     pool = DenoiserPool.create(prepared, n=2)      # actors load the checkpoint (digest-checked)
     planner = make_planner(cfg, pool.denoiser(), normaliser)
@@ -94,20 +97,22 @@ class DenoiserActor:
             raise self._error
         return {**self._info, "pid": os.getpid(), "node_id": ray.get_runtime_context().get_node_id()}
 
-    def denoise(self, batch: DenoiseBatch) -> DenoiseResult:
-        """Exactly one micro-batch of M jobs (the caller cut and padded it)."""
+    def denoise(self, batch: DenoiseBatch, micro_batch: int) -> DenoiseResult:
+        """One segment: whole micro-batches of ``micro_batch`` jobs in job order (the caller cut and padded
+        them), run one micro-batch per model call as the caller cut them."""
         if self._error is not None:
             raise self._error
-        return self._denoiser.denoise(batch)
+        return self._denoiser.denoise(batch, micro_batch=micro_batch)
 
 
 @dataclass
 class _Shard:
-    """One micro-batch in flight: which jobs it holds and where it was sent."""
+    """One segment in flight (a call): which jobs it holds and where it was sent."""
 
-    index: int  # micro-batch number in job order
-    batch: DenoiseBatch  # exactly M jobs (already a copy)
+    index: int  # segment number in job order
+    batch: DenoiseBatch  # whole micro-batches of M jobs (already a copy)
     keep: int  # real (unpadded) jobs
+    micro_batches: int  # how many: its call may take call_timeout_s for each
     actor: int = -1
     deadline: float = 0.0
     tried: set = field(default_factory=set)
@@ -147,7 +152,11 @@ class RayDenoiser:
         if b == 0:
             empty = np.zeros((0, t, d), np.float32)
             return DenoiseResult(empty, empty.copy(), stats={"micro_batches": 0, "actors": len(self.actors)})
-        shards = [_Shard(i, batch.take(idx), min(m, b - i * m)) for i, idx in enumerate(micro_batch_indices(b, m))]
+        cut = micro_batch_indices(b, m)
+        # one contiguous segment of micro-batches per live actor (fewer when there are fewer micro-batches)
+        groups = np.array_split(np.arange(len(cut)), max(1, min(len(cut), self.live_actors())))
+        shards = [_Shard(i, batch.take(np.concatenate([cut[j] for j in g])), min(b, (g[-1] + 1) * m) - g[0] * m, len(g))
+                  for i, g in enumerate(groups)]
         xs: list[np.ndarray | None] = [None] * len(shards)
         x0s: list[np.ndarray | None] = [None] * len(shards)
         seconds, retries, used = 0.0, 0, set()
@@ -184,12 +193,14 @@ class RayDenoiser:
                         ray.cancel(ref)
                     except Exception:  # noqa: BLE001 - cancelling is best effort
                         pass
-                    self._failed(s, TimeoutError(f"no answer within ray.call_timeout_s={self.call_timeout_s}"))
+                    self._failed(s, TimeoutError(f"no answer within ray.call_timeout_s={self.call_timeout_s} "
+                                                    f"x {s.micro_batches} micro-batch(es)"))
                     retries += 1
                     pending[self._submit(s)] = s
         return DenoiseResult(
             x=np.concatenate(xs), x0=np.concatenate(x0s), denoise_time_s=seconds, retries=retries,
-            stats={"micro_batches": len(shards), "padded_jobs": len(shards) * m - b, "actors_used": len(used)},
+            stats={"micro_batches": len(cut), "padded_jobs": len(cut) * m - b, "calls": len(shards),
+                   "actors_used": len(used)},
         )
 
     def _submit(self, s: _Shard) -> Any:
@@ -208,9 +219,9 @@ class RayDenoiser:
             a = order[0]
             self._rr = (a + 1) % n
             self._inflight[a] += 1
-        s.actor, s.deadline = a, time.monotonic() + self.call_timeout_s
+        s.actor, s.deadline = a, time.monotonic() + self.call_timeout_s * s.micro_batches
         s.tried.add(a)
-        return self.actors[a].denoise.remote(s.batch)
+        return self.actors[a].denoise.remote(s.batch, self.micro_batch)
 
     def _failed(self, s: _Shard, error: BaseException) -> None:
         with self._lock:
@@ -229,9 +240,9 @@ class DenoiserPool:
     """The denoiser actors of one run; hands out :class:`RayDenoiser` views that share them.
 
     Several trees (threads here, or PlannerDriver actors given :attr:`actors`) may use the
-    pool at once; each actor serves micro-batches from all of them in arrival order, and since
-    a micro-batch's bits do not depend on who else is queued, every tree gets the plan it
-    would get alone.
+    pool at once; each actor serves segments from all of them in arrival order, and since a
+    micro-batch's bits do not depend on who else is queued, every tree gets the plan it would
+    get alone.
     """
 
     def __init__(self, actors: list, cfg: Config, infos: list[dict[str, Any]]):
