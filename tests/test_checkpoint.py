@@ -75,6 +75,8 @@ def test_wrong_expected_digest(tmp_path):
     ("model.width=64", "model.width"),
     ("env=pointmaze-large", "env.name"),
     ("env.horizon=1000", "n_tokens"),
+    ("diffusion.beta_schedule=cosine", "diffusion.beta_schedule"),  # a sampler on another noise schedule
+    ("diffusion.timesteps=100", "diffusion.timesteps"),
 ])
 def test_config_mismatch_names_the_field(tmp_path, override, field):
     save_tiny(tmp_path, tiny_cfg())
@@ -109,3 +111,12 @@ def test_train_state_round_trip_weights_only(tmp_path):
     gen2.set_state(st["torch_rng"])
     assert torch.equal(torch.rand(4, generator=gen2), torch.rand(4, generator=gen))
     assert load_train_state(tmp_path / "none") is None
+
+
+def test_a_manifest_without_a_noise_schedule_loads_under_any(tmp_path):
+    """Manifests of models that do not denoise carry no diffusion block: nothing to compare, nothing refused."""
+    save_tiny(tmp_path, tiny_cfg())
+    manifest = json.loads((tmp_path / MANIFEST_FILE).read_text())
+    del manifest["config"]["diffusion"]
+    (tmp_path / MANIFEST_FILE).write_text(json.dumps(manifest))
+    load_checkpoint(tmp_path, tiny_cfg("diffusion.beta_schedule=cosine"))

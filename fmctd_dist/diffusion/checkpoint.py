@@ -37,6 +37,9 @@ FORMAT_VERSION = 1
 MODEL_FIELDS = ("kind", "frame_stack", "width", "layers", "heads", "ff", "param", "norm")
 UNET_FIELDS = ("unet_channels", "unet_kernel", "unet_padding", "unet_edge_frames")  # checked when kind=diffuser
 SHAPE_FREE_FIELDS = ("unet_padding", "unet_edge_frames")  # fields a state_dict does not depend on: train.init_from may change them
+# the noise schedule the weights were trained under: a sampler built on another one asks the model about noise
+# levels it never saw, with no error of its own
+DIFFUSION_FIELDS = ("timesteps", "beta_schedule", "beta_start", "beta_end")
 
 
 def _model_fields(cfg: Config) -> tuple[str, ...]:
@@ -289,6 +292,8 @@ def _mismatch(manifest: dict[str, Any], cfg: Config) -> tuple[str, Any, Any] | N
     pairs = [("env.name", saved.get("env", {}).get("name"), cfg.env.name), ("jump", saved.get("jump"), cfg.jump)]
     pairs += [(f"model.{f}", saved_model.get(f), getattr(cfg.model, f)) for f in _model_fields(cfg)]
     pairs += [("n_tokens", manifest.get("n_tokens"), cfg.n_tokens)]
+    schedule = saved.get("diffusion") or {}  # absent from manifests of models that do not denoise
+    pairs += [(f"diffusion.{f}", schedule[f], getattr(cfg.diffusion, f)) for f in DIFFUSION_FIELDS if f in schedule]
     return next(((name, have, want) for name, have, want in pairs if have != want), None)
 
 
