@@ -322,9 +322,6 @@ class EvalConfig:
     out: str = "results"  # results root; rows go to <out>/<run>/<method>/<env>/...
     run: str = "default"
     episode_time_limit: float = spec(0.0, ge=0, why="seconds of planning per episode; 0 = none")
-    # Rerunning into a run whose rows came from another config or checkpoint is refused; true keeps those
-    # rows and adds this config's missing keys (tables then show each config on its own line).
-    resume_mixed: bool = False
     # torch threads of an in-process denoiser (runner=local, bench_speed); 0 = torch default.
     # Set 1 when other jobs share the cores: 2 spinning threads on a busy 2-core machine run 10x slower.
     threads: int = spec(0, ge=0, why=THREADS)

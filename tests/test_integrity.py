@@ -123,13 +123,11 @@ def test_rerun_with_another_config_is_refused_listing_what_differs(tmp_path):
     msg = str(e.value)
     assert "method.parallel: rows have 200, this run has 50" in msg
     assert "method.warp_threshold: rows have 2.0, this run has 1.5" in msg
-    assert "eval.run=<new name>" in msg and "eval.resume_mixed=true" in msg
+    assert "eval.run=<new name>" in msg and "aside" in msg
     with pytest.raises(ResultsError, match="checkpoint digest"):
         missing(prepared(digest="e" * 16), store)
-    # opting in keeps the old rows and runs only this config's missing keys
-    said: list[str] = []
-    assert missing(prepared("method.parallel=50", "eval.resume_mixed=true"), store, said.append) == [(2, 0)]
-    assert any("1 key(s) of this grid hold rows of another config" in s and "task 1 seed 0" in s for s in said)
+    with pytest.raises(ConfigError, match="resume_mixed"):  # the opt-in that let a run mix them is gone
+        prepared("eval.resume_mixed=true")
 
 
 def test_rows_of_another_low_level_policy_are_refused(tmp_path):

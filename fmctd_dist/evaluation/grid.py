@@ -64,9 +64,8 @@ def missing(p: Prepared, store: ResultStore, log: Callable[[str], None] = print)
     """The (task, seed) keys of the grid without a row: what a (re)run still has to do.
 
     Refuses (ResultsError, before anything starts) when the run already holds rows of this
-    method and env from another config or checkpoint, listing what differs, unless
-    ``eval.resume_mixed`` opts in (those rows are then kept, and tables show them apart).
-    Unreadable row files count as missing and are reported.
+    method and env from another config or checkpoint, listing what differs (design §7: a run
+    directory never mixes them). Unreadable row files count as missing and are reported.
     """
     cfg = p.cfg
     rows = store.rows(cfg.method.name, cfg.env.name)
@@ -74,21 +73,14 @@ def missing(p: Prepared, store: ResultStore, log: Callable[[str], None] = print)
         log(line)
     key = (p.config_hash, p.checkpoint_digest, p.policy_digest)
     foreign = [r for r in rows if (r.get("config_hash"), r.get("checkpoint_digest"), r.get("policy_digest") or "") != key]
-    if foreign and not cfg.eval.resume_mixed:
+    if foreign:
         diffs = list(dict.fromkeys(d for r in foreign for d in differences(r, cfg, p.checkpoint_digest,
                                                                                 p.policy_digest)))
         raise ResultsError(
             f"{store.root / cfg.method.name / cfg.env.name} holds {len(foreign)} row(s) from another config or "
             f"checkpoint: {'; '.join(diffs[:12])}{' ...' if len(diffs) > 12 else ''}. Write to a new run with "
-            f"eval.run=<new name>, or keep those rows and add this config's with eval.resume_mixed=true "
-            "(tables list each config on its own line)")
+            f"eval.run=<new name>, or move {store.root / cfg.method.name / cfg.env.name} aside to replace them")
     done = {(int(r["task"]), int(r["seed"])) for r in rows}
-    held = sorted({(int(r["task"]), int(r["seed"])) for r in foreign} & set(grid(cfg)))
-    if held:  # one row file per (task, seed): these keep the other config's row and are not re-run
-        log(f"eval.resume_mixed: {len(held)} key(s) of this grid hold rows of another config or checkpoint and are "
-            f"kept, not re-run on this one: {', '.join(f'task {t} seed {s}' for t, s in held[:10])}"
-            f"{' ...' if len(held) > 10 else ''}. To re-run them, move "
-            f"{store.root / cfg.method.name / cfg.env.name} aside or write to eval.run=<new name>")
     return [(t, s) for t, s in grid(cfg) if (t, s) not in done]
 
 
