@@ -191,3 +191,8 @@ def test_plan_identical_local_and_two_actors_under_bf16_and_compile(tiny_checkpo
     finally:
         pool.shutdown()
     assert_same(got, ref)
+    # the actors print nothing: an emulated-bf16 warning (this CPU's, on this one node) comes back in their info
+    import torch
+
+    from fmctd_dist.device import bf16_warning
+    assert [i["warning"] for i in pool.infos] == [bf16_warning(torch.device("cpu"), "diffusion.precision")] * 2

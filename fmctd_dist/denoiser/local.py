@@ -28,7 +28,8 @@ class LocalDenoiser:
     """Runs DenoiseBatch jobs with a DFTransformer; a pure function of the batch."""
 
     def __init__(self, model: DFTransformer, diffusion_cfg: DiffusionConfig, device: str = "cpu",
-                 micro_batch: int = 64, digest: str = "", guide_map: torch.nn.Module | None = None):
+                 micro_batch: int = 64, digest: str = "", guide_map: torch.nn.Module | None = None,
+                 warn: bool = True):
         if micro_batch < 1:
             raise ValueError(f"micro_batch={micro_batch} must be >= 1")
         self.device = resolve_device(device)
@@ -36,7 +37,7 @@ class LocalDenoiser:
         self.model.requires_grad_(False)  # guidance needs d/dx only, never parameter grads
         # what runs the network: fp32 eager (reference), bf16 weights + autocast, and/or compiled
         self.precision, self.compiled = diffusion_cfg.precision, diffusion_cfg.compile
-        self.net = runtime_model(self.model, self.precision, self.compiled)
+        self.net = runtime_model(self.model, self.precision, self.compiled, warn)
         self.consts = make_consts(diffusion_cfg, self.device)
         self.guidance_path = diffusion_cfg.guidance_path  # through the whole x0 estimate, or its network branch
         self.micro_batch = micro_batch
@@ -46,14 +47,16 @@ class LocalDenoiser:
 
     @classmethod
     def from_checkpoint(cls, path: str | Path, cfg: Config, device: str | None = None,
-                        micro_batch: int | None = None, expect_digest: str | None = None) -> "LocalDenoiser":
-        """Load and verify a checkpoint against ``cfg`` (device/micro_batch default to cfg's)."""
+                        micro_batch: int | None = None, expect_digest: str | None = None,
+                        warn: bool = True) -> "LocalDenoiser":
+        """Load and verify a checkpoint against ``cfg`` (device/micro_batch default to cfg's); ``warn=False``:
+        no emulated-bf16 warning on stderr (Ray actors return it in their info instead)."""
         from fmctd_dist.diffusion.checkpoint import load_checkpoint
         from fmctd_dist.hooks import guide_map_for
 
         model, manifest = load_checkpoint(path, cfg, expect_digest)
         return cls(model, cfg.diffusion, device or cfg.device, micro_batch or cfg.ray.micro_batch, manifest["digest"],
-                   guide_map_for(cfg, manifest))
+                   guide_map_for(cfg, manifest), warn)
 
     def denoise(self, batch: DenoiseBatch, micro_batch: int | None = None) -> DenoiseResult:
         """x_out, x0 [B, T, D] float32 for B jobs; denoise_time_s = wall time of the model work.

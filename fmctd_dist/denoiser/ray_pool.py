@@ -70,6 +70,7 @@ class DenoiserActor:
         import torch
 
         from fmctd_dist.denoiser.local import LocalDenoiser
+        from fmctd_dist.device import bf16_warning
 
         cfg = config_from_dict(cfg_dict)
         torch.set_num_threads(max(1, int(cfg.ray.num_cpus)))
@@ -86,8 +87,12 @@ class DenoiserActor:
                     f"torch.cuda.device_count()={torch.cuda.device_count()}); give each actor a GPU with "
                     "ray.num_gpus=1 on a cluster with GPUs, or set device=cpu"
                 )
-            self._denoiser = LocalDenoiser.from_checkpoint(checkpoint, cfg, device=device, expect_digest=digest)
+            self._denoiser = LocalDenoiser.from_checkpoint(checkpoint, cfg, device=device, expect_digest=digest,
+                                                           warn=False)
             self._info["device"] = str(self._denoiser.device)
+            # an emulated-bf16 warning goes back to the job process, which says it (actors print nothing)
+            self._info["warning"] = (bf16_warning(self._denoiser.device, "diffusion.precision")
+                                     if cfg.diffusion.precision == "bf16" else None)
         except FmctdError as e:
             self._error = e
 

@@ -131,15 +131,16 @@ class CompiledStep:
             return self.fn(self.net, *args)
 
 
-def runtime_model(model: nn.Module, precision: str = "fp32", compile: bool = False) -> nn.Module:
+def runtime_model(model: nn.Module, precision: str = "fp32", compile: bool = False, warn: bool = True) -> nn.Module:
     """``model`` (eval mode, no parameter grads) prepared for inference; fp32 eager returns it as is.
+    ``warn=False`` leaves the emulated-bf16 warning to the caller (a Ray actor prints nothing).
 
     With ``compile`` the returned module carries ``guided_estimate`` (a :class:`CompiledStep`);
     calling the module itself stays eager (the sampler takes the compiled step for every transition).
     """
     if precision == "fp32" and not compile:
         return model
-    if precision == "bf16":
+    if precision == "bf16" and warn:
         warn_bf16(next(model.parameters()).device, "diffusion.precision")
     wrapped = RuntimeModel(model, precision)
     if compile:

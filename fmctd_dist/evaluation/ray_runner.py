@@ -254,6 +254,8 @@ def run_ray(p: Prepared, store: ResultStore, progress: bool = True,
         log(f"{len(pool.actors)} denoiser actor(s): " + "; ".join(
             f"pid {i['pid']} device {i['device']} gpu_ids {i['gpu_ids']} cuda devices {i['cuda_device_count']}"
             for i in pool.infos))
+        for warning in dict.fromkeys(i.get("warning") for i in pool.infos if i.get("warning")):
+            log(warning)
         n_envs = min(n_env_actors, len(todo))
         pairs = [episode_pair(p, pool.actors) for _ in range(n_envs)]
         actors = [a for pair in pairs for a in pair]
