@@ -125,8 +125,8 @@ def main(argv: list[str]) -> int:
     # the at-a-glance block at the top of the doc: the maze and robot lines above, one success cell each
     text = doc.read_text()
     if "<!-- report:glance -->" in text:
-        glance_envs = ENV_ORDER + ANT_ENV_ORDER + CUBE_ENV_ORDER
-        sections["glance"] = glance_table(main_rows + robot, glance_envs,
+        columns = {**{e: METHOD_ORDER for e in ENV_ORDER + ANT_ENV_ORDER}, **{e: CUBE_METHOD_ORDER for e in CUBE_ENV_ORDER}}
+        sections["glance"] = glance_table(main_rows + robot, columns,
                                           {**shipped_digests(ENV_ORDER + ANT_ENV_ORDER, METHOD_ORDER), **shipped})
     text = fill_markers(text, sections)
     doc.write_text(text)

@@ -231,7 +231,7 @@ def test_ablation_lines_on_weights_no_longer_shipped_say_so():
 
 def test_glance_table_shows_todays_largest_line_per_cell_beside_the_paper():
     """One cell per (method, env): the line on today's weights with the most episodes, a count when under 50,
-    a dagger when every line is on replaced weights, '–' for what was not run; cube envs take the replanning row."""
+    a dagger when every line is on replaced weights, '–' for what was not run; each column its own methods."""
     def r(task, seed, ok, method, env, digest):
         return {**row(task, seed, ok, method=method, env=env), "config_hash": "c" * 16, "checkpoint_digest": digest,
                 "episode_time_limit": 0.0}
@@ -242,8 +242,9 @@ def test_glance_table_shows_todays_largest_line_per_cell_beside_the_paper():
             + [r(1, 0, True, "fast-mctd-replan", "cube-single", "new")])
     shipped = {("fast-mctd", "pointmaze-giant"): "new", ("s-mctd", "pointmaze-giant"): "new",
                ("fast-mctd-replan", "cube-single"): "new"}
-    table = glance_table(rows, ["pointmaze-giant", "cube-single"], shipped)
+    maze, cube = ["mctd", "s-mctd", "fast-mctd"], ["mctd-replan", "s-mctd-replan", "fast-mctd-replan"]
+    table = glance_table(rows, {"pointmaze-giant": maze, "cube-single": cube}, shipped)
     assert table.splitlines()[0] == "| method | point giant | cube single |"
-    assert "| fast-mctd (fast-mctd-replan on cubes) | 92 / 100 | 100 (1) / 100 |" in table
-    assert "| s-mctd (s-mctd-replan on cubes) | 100 (4) † / 100 | – / 100 |" in table
-    assert "| mctd (mctd-replan on cubes) | – / 100 | – / 100 |" in table
+    assert "| fast-mctd / fast-mctd-replan | 92 / 100 | 100 (1) / 100 |" in table
+    assert "| s-mctd / s-mctd-replan | 100 (4) † / 100 | – / 100 |" in table
+    assert "| mctd / mctd-replan | – / 100 | – / 100 |" in table

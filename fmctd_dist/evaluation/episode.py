@@ -16,7 +16,7 @@ import numpy as np
 
 from fmctd_dist.config import Config
 from fmctd_dist.envs.pointmaze import PointMaze
-from fmctd_dist.evaluation.controllers import ControllerFactory, controller_factory
+from fmctd_dist.control.maze_robots import ControllerFactory, controller_factory
 from fmctd_dist.evaluation.plan_tally import PlanTally
 from fmctd_dist.planners.base import Planner, plan_seed
 

@@ -193,12 +193,6 @@ def maze_table(rows: list[dict[str, Any]], envs: list[str] = ENV_ORDER, methods:
     return "\n".join(lines)
 
 
-# the at-a-glance table's rows: a maze method and the replanning method the robot table puts in its place
-GLANCE_ROWS = [("diffuser", "diffuser"), ("diffuser-replan", "diffuser-replan"),
-               ("diffusion-forcing", "diffusion-forcing"), ("mctd", "mctd-replan"), ("p-mctd", "p-mctd-replan"),
-               ("s-mctd", "s-mctd-replan"), ("fast-mctd", "fast-mctd-replan")]
-
-
 def _glance_line(lines: list[dict[str, Any]], shipped: str | None) -> tuple[dict[str, Any], bool]:
     """The line a cell shows: on today's weights if any is, then the one with the most episodes; and
     whether it is on today's weights."""
@@ -207,11 +201,12 @@ def _glance_line(lines: list[dict[str, Any]], shipped: str | None) -> tuple[dict
     return max(pool, key=lambda s: s["episodes"]), bool(today)
 
 
-def glance_table(rows: list[dict[str, Any]], envs: list[str],
+def glance_table(rows: list[dict[str, Any]], columns: dict[str, list[str]],
                  shipped: dict[tuple[str, str], str] | None = None) -> str:
     """One cell per (method, env): our success % against the paper's, e.g. ``84 / 100``, from the same
-    lines as the full tables (:func:`maze_table`); ``envs`` in column order (cube envs take the
-    replanning method of their row). A (method, env) with several lines shows the one on today's
+    lines as the full tables (:func:`maze_table`). ``columns``: env -> its methods in row order (the
+    maze table's for a maze, the robot table's replanning ones for a cube env), so row i holds each
+    env's i-th method and is named by them. A (method, env) with several lines shows the one on today's
     weights with the most episodes; ``†`` marks a cell whose lines are all on replaced weights,
     ``(n)`` a line of fewer than 50 episodes. For reading at a glance only: the full tables say
     which config, seeds and planning times each number has."""
@@ -219,12 +214,13 @@ def glance_table(rows: list[dict[str, Any]], envs: list[str],
     key: dict[tuple[str, str], list[dict[str, Any]]] = {}
     for s in summary:
         key.setdefault((s["method"], s["env"]), []).append(s)
+    envs = list(columns)
     short = [e.replace("pointmaze-", "point ").replace("antmaze-", "ant ").replace("cube-", "cube ") for e in envs]
     lines = ["| method | " + " | ".join(short) + " |", "|---" * (len(envs) + 1) + "|"]
-    for maze_m, cube_m in GLANCE_ROWS:
+    for i in range(max(len(ms) for ms in columns.values())):
         cells = []
-        for env in envs:
-            m = cube_m if env.startswith("cube-") else maze_m
+        for env, methods in columns.items():
+            m = methods[i] if i < len(methods) else ""
             paper = paper_cell(m, env).split(" ", 1)[0]
             if (m, env) not in key:
                 cells.append(f"– / {paper}")
@@ -232,8 +228,8 @@ def glance_table(rows: list[dict[str, Any]], envs: list[str],
             s, today = _glance_line(key[(m, env)], (shipped or {}).get((m, env)))
             few = f" ({s['episodes']})" if s["episodes"] < 50 else ""
             cells.append(f"{s['success']:.0f}{few}{'' if today else ' †'} / {paper}")
-        name = maze_m if maze_m == cube_m else f"{maze_m} ({cube_m} on cubes)"
-        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+        names = list(dict.fromkeys(ms[i] for ms in columns.values() if i < len(ms)))
+        lines.append(f"| {' / '.join(names)} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 

@@ -46,7 +46,7 @@ def plan_rules(cfg: Config) -> MazeRules:
 
 
 def check_episodes(cfg: Config) -> str:
-    from fmctd_dist.evaluation.controllers import check_controller
+    from fmctd_dist.control.maze_robots import check_controller
 
     manifest = check_controller(cfg)  # AntMaze: the low-level policy exists and was trained for this maze
     return str(manifest.get("digest", "")) if manifest else ""
@@ -57,7 +57,7 @@ class MazeEpisodes:
 
     def __init__(self, cfg: Config):
         from fmctd_dist.envs import make_env
-        from fmctd_dist.evaluation.controllers import controller_factory
+        from fmctd_dist.control.maze_robots import controller_factory
 
         self.cfg = cfg
         self.env = make_env(cfg.env.name, cfg.env.protocol)

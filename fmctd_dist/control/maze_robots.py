@@ -1,4 +1,5 @@
-"""Plan -> actions, per robot: PD on waypoints (PointMaze) or subgoals + a learned policy (AntMaze).
+"""The maze family's robots, plan -> actions: PD on waypoints (PointMaze) or subgoals + a learned policy
+(AntMaze). The choice lives here, with the family's controllers, so evaluation/ never branches on the robot.
 
 An episode only needs ``make_controller(plan) -> controller`` with ``controller.act(obs)``;
 this module picks the kind from ``env.name`` and, for the ant, loads and checks the
