@@ -513,6 +513,8 @@ def parse_overrides(args: list[str]) -> tuple[dict[str, str], list[tuple[str, st
             groups[key] = value.strip()
         elif key in valid:
             dotted.append((key, value))
+        elif key in RETIRED:
+            raise ConfigError(f"{key}={value}: {RETIRED[key]}")
         else:
             raise ConfigError(f"unknown config key {key!r}{did_you_mean(key, valid + list(GROUPS) + list(ALIASES))}")
     return groups, dotted
@@ -540,8 +542,19 @@ def load_config(args: list[str] | None = None, *, env: str = "pointmaze-medium",
     return obj
 
 
+# fields that existed once: a stored config (a manifest, a row) that holds one still loads, without it; a
+# command that sets one is told why it is gone
+RETIRED = {"eval.resume_mixed": "removed in session 26: a run directory never mixes configs or checkpoints "
+                                "(design 7); write to eval.run=<new name>, or move the old rows aside"}
+
+
 def config_from_dict(d: dict[str, Any]) -> Config:
-    """Rebuild a Config from ``Config.to_dict()`` output (checkpoint manifests, Ray payloads)."""
+    """Rebuild a Config from ``Config.to_dict()`` output (checkpoint manifests, Ray payloads); RETIRED fields are dropped."""
+    d = {k: dict(v) if isinstance(v, dict) else v for k, v in d.items()}
+    for key in RETIRED:
+        group, _, name = key.partition(".")
+        if isinstance(d.get(group), dict):
+            d[group].pop(name, None)
     cfg = merge_checked(OmegaConf.structured(Config), OmegaConf.create(d), "config dict")
     return OmegaConf.to_object(cfg)  # type: ignore[return-value]
 

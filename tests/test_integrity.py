@@ -12,7 +12,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
-from fmctd_dist.config import REPO_ROOT, Config, Range, field_ranges, load_config
+from fmctd_dist.config import REPO_ROOT, Config, Range, config_from_dict, field_ranges, load_config
 from fmctd_dist.errors import ConfigError, ResultsError
 from fmctd_dist.evaluation.grid import Prepared, missing, provenance
 from fmctd_dist.evaluation.identity import CONFIG_SCHEMA, config_hash, plan_fields
@@ -126,8 +126,15 @@ def test_rerun_with_another_config_is_refused_listing_what_differs(tmp_path):
     assert "eval.run=<new name>" in msg and "aside" in msg
     with pytest.raises(ResultsError, match="checkpoint digest"):
         missing(prepared(digest="e" * 16), store)
-    with pytest.raises(ConfigError, match="resume_mixed"):  # the opt-in that let a run mix them is gone
-        prepared("eval.resume_mixed=true")
+    with pytest.raises(ConfigError, match="resume_mixed=true: removed in session 26.*eval.run=<new name>"):
+        prepared("eval.resume_mixed=true")  # the opt-in that let a run mix them is gone, and says so
+
+
+def test_a_stored_config_with_a_retired_field_still_loads():
+    """Manifests and rows written while eval.resume_mixed existed hold it: they load, without it."""
+    d = load_config([]).to_dict()
+    d["eval"]["resume_mixed"] = False
+    assert config_from_dict(d) == load_config([])
 
 
 def test_rows_of_another_low_level_policy_are_refused(tmp_path):
