@@ -85,12 +85,12 @@ def main(argv: list[str]) -> int:
 
     main_rows = merge_rows(committed, fresh, "main")
     all_rows += main_rows
+    maze_shipped = shipped_digests(ENV_ORDER + ANT_ENV_ORDER, METHOD_ORDER)  # the maze, AntMaze and glance tables'
     if main_rows:
         point_rows = [r for r in main_rows if r["env"] in ENV_ORDER]
-        sections["maze"] = maze_table(point_rows, shipped=shipped_digests(ENV_ORDER, METHOD_ORDER))
+        sections["maze"] = maze_table(point_rows, shipped=maze_shipped)
         if any(r["env"] in ANT_ENV_ORDER for r in main_rows):
-            sections["antmaze"] = maze_table(main_rows, ANT_ENV_ORDER,
-                                             shipped=shipped_digests(ANT_ENV_ORDER, METHOD_ORDER))
+            sections["antmaze"] = maze_table(main_rows, ANT_ENV_ORDER, shipped=maze_shipped)
         plot_success_vs_time(summarise(point_rows), figures / "success_vs_time.png")
         for env in ENV_ORDER + ANT_ENV_ORDER:  # one Fast-MCTD plan per maze, drawn with what the controller executed
             # committed rows carry no trajectories: a maze without fresh rows keeps its figure
@@ -125,9 +125,9 @@ def main(argv: list[str]) -> int:
     # the at-a-glance block at the top of the doc: the maze and robot lines above, one success cell each
     text = doc.read_text()
     if "<!-- report:glance -->" in text:
-        columns = {**{e: METHOD_ORDER for e in ENV_ORDER + ANT_ENV_ORDER}, **{e: CUBE_METHOD_ORDER for e in CUBE_ENV_ORDER}}
-        sections["glance"] = glance_table(main_rows + robot, columns,
-                                          {**shipped_digests(ENV_ORDER + ANT_ENV_ORDER, METHOD_ORDER), **shipped})
+        columns = {**{e: METHOD_ORDER for e in ENV_ORDER + ANT_ENV_ORDER},
+                   **{e: CUBE_METHOD_ORDER for e in CUBE_ENV_ORDER}}
+        sections["glance"] = glance_table(main_rows + robot, columns, {**maze_shipped, **shipped})
     text = fill_markers(text, sections)
     doc.write_text(text)
     if all_rows:

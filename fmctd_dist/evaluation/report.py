@@ -150,6 +150,14 @@ def current_rows(rows: list[dict[str, Any]],
     return out, dropped
 
 
+def _lines(rows: list[dict[str, Any]]) -> dict[tuple[str, str], list[dict[str, Any]]]:
+    """Per (method, env): its table lines, one summary per config/checkpoint (:func:`summarise`)."""
+    key: dict[tuple[str, str], list[dict[str, Any]]] = {}
+    for s in summarise(rows):
+        key.setdefault((s["method"], s["env"]), []).append(s)
+    return key
+
+
 def _method_cell(s: dict[str, Any], shipped: dict[tuple[str, str], str] | None) -> str:
     """The line's method cell; lines whose weights are not the checkpoint shipped today say so.
 
@@ -168,10 +176,7 @@ def maze_table(rows: list[dict[str, Any]], envs: list[str] = ENV_ORDER, methods:
     (``methods``; the robot table passes the cube envs and the replanning methods, ``dropped``
     from :func:`current_rows`, said in the episodes cell, and ``shipped``: the digest of each
     (method, env)'s default checkpoint today, so that a line on older weights is marked)."""
-    summary = summarise(rows)
-    key: dict[tuple[str, str], list[dict[str, Any]]] = {}
-    for s in summary:
-        key.setdefault((s["method"], s["env"]), []).append(s)
+    key = _lines(rows)
     # "in denoiser": share of planning time spent computing inside denoiser actors / inside denoiser calls
     # (the latter adds queueing behind other env actors and Ray transport; "–" for rows recorded before it existed)
     lines = ["| method | env | episodes (tasks x seeds) | success (%) | planning time (s) | in denoiser: compute / calls | "
@@ -210,10 +215,7 @@ def glance_table(rows: list[dict[str, Any]], columns: dict[str, list[str]],
     weights with the most episodes; ``†`` marks a cell whose lines are all on replaced weights,
     ``(n)`` a line of fewer than 50 episodes. For reading at a glance only: the full tables say
     which config, seeds and planning times each number has."""
-    summary = summarise(rows)
-    key: dict[tuple[str, str], list[dict[str, Any]]] = {}
-    for s in summary:
-        key.setdefault((s["method"], s["env"]), []).append(s)
+    key = _lines(rows)
     envs = list(columns)
     short = [e.replace("pointmaze-", "point ").replace("antmaze-", "ant ").replace("cube-", "cube ") for e in envs]
     lines = ["| method | " + " | ".join(short) + " |", "|---" * (len(envs) + 1) + "|"]
