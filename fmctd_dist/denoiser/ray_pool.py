@@ -159,9 +159,10 @@ class RayDenoiser:
             return DenoiseResult(empty, empty.copy(), stats={"micro_batches": 0, "actors": len(self.actors)})
         cut = micro_batch_indices(b, m)
         # one contiguous segment of micro-batches per live actor (fewer when there are fewer micro-batches)
-        groups = np.array_split(np.arange(len(cut)), max(1, min(len(cut), self.live_actors())))
-        shards = [_Shard(i, batch.take(np.concatenate([cut[j] for j in g])), min(b, (g[-1] + 1) * m) - g[0] * m, len(g))
-                  for i, g in enumerate(groups)]
+        shards = []
+        for i, g in enumerate(np.array_split(np.arange(len(cut)), max(1, min(len(cut), self.live_actors())))):
+            keep = min(b, (g[-1] + 1) * m) - g[0] * m  # real jobs: only the batch's last micro-batch is padded
+            shards.append(_Shard(i, batch.take(np.concatenate([cut[j] for j in g])), keep, len(g)))
         xs: list[np.ndarray | None] = [None] * len(shards)
         x0s: list[np.ndarray | None] = [None] * len(shards)
         seconds, retries, used = 0.0, 0, set()
