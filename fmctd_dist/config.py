@@ -338,7 +338,12 @@ class RayConfig:
     num_cpus: float = spec(1.0, ge=0, why="CPUs per denoiser actor")
     call_timeout_s: float = spec(300.0, gt=0, why="a call slower than this per micro-batch it holds is re-routed")
     max_restarts: int = spec(3, ge=0, why="restarts per denoiser actor, and re-runs per episode whose env actor or "
-                                         "driver died; 0 = neither (a dead actor's micro-batches are still re-routed)")
+                                         "driver died or timed out; 0 = neither (a dead actor's micro-batches are "
+                                         "still re-routed)")
+    # The longest episode recorded on our 2-core CPU took 358 s (MCTD-family on PointMaze-giant): an hour is
+    # 10x that, so only a hung env actor or driver (alive, never answering) reaches it.
+    episode_timeout_s: float = spec(3600.0, gt=0, why="an episode still running after this long is killed and re-run "
+                                                      "on a new env actor + driver; raise it for slower episodes")
 
 
 @dataclass

@@ -1,5 +1,6 @@
 """Faults (design §6): a denoiser actor killed mid-batch still gives the identical plan (retries
-counted); with restarts off and every actor dead, one clear DeviceError in bounded time."""
+counted); with restarts off and every actor dead, one clear DeviceError in bounded time; an episode
+past ray.episode_timeout_s is re-run, then one clear DeviceError, never a hang."""
 
 from __future__ import annotations
 
@@ -132,3 +133,18 @@ def test_slow_actor_is_rerouted_after_call_timeout(tiny_checkpoint, ray_cluster)
     finally:
         ray.kill(hung)
         pool.shutdown()
+
+
+def test_episode_past_its_timeout_is_rerun_then_one_error_not_a_hang(tiny_checkpoint, ray_cluster, tmp_path):
+    """An env actor that never answers (here: every episode outlives a 0.5 s limit) is killed and its episode
+    re-run on a new pair, ray.max_restarts times; then one DeviceError naming the field, and no row."""
+    from fmctd_dist.evaluation.ray_runner import evaluate
+
+    args, _ = tiny_checkpoint
+    overrides = args + SEARCH + [f"eval.out={tmp_path}", "eval.run=r", "tasks=[2]", "seeds=[0]",
+                                 "ray.episode_timeout_s=0.5", "ray.max_restarts=1"]
+    t0 = time.monotonic()
+    with pytest.raises(DeviceError, match=r"task 2 seed 0: its episode ran past ray.episode_timeout_s=0.5, 2 time"):
+        evaluate(overrides, progress=False)
+    assert time.monotonic() - t0 < 60
+    assert not list(tmp_path.rglob("*.parquet"))

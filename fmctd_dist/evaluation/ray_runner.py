@@ -12,8 +12,9 @@ Errors raised on purpose inside actors (FmctdError) reach the user as themselves
 
 Faults (design §6; tests/test_ray_faults.py, tests/test_ray_multinode.py): a dead denoiser actor's
 micro-batches are re-routed (RayDenoiser); an episode whose EnvActor or PlannerDriver dies (killed,
-out of memory, its node gone) left no row, so it is run again from the start on a new pair, up to
-``ray.max_restarts`` times per episode; both count in the row's ``retries``. Plans are a pure
+out of memory, its node gone) or is still running after ``ray.episode_timeout_s`` (alive but hung)
+left no row, so it is run again from the start on a new pair, up to ``ray.max_restarts`` times per
+episode; both count in the row's ``retries``. Plans are a pure
 function of (config, checkpoint, seed), so every row is the one a fault-free run writes. A stopped
 or killed job keeps the rows it wrote; rerunning it runs only the missing keys.
 
@@ -30,6 +31,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import os
+import time
 from typing import Any, Callable
 
 import numpy as np
@@ -260,37 +262,47 @@ def run_ray(p: Prepared, store: ResultStore, progress: bool = True,
         pairs = [episode_pair(p, pool.actors) for _ in range(n_envs)]
         actors = [a for pair in pairs for a in pair]
         rows: list[dict[str, Any]] = []
-        queue, free, pending = list(todo), list(pairs), {}
-        reruns: dict[tuple[int, int], int] = {}  # episodes re-run because an actor (or its node) died
+        queue, free = list(todo), list(pairs)
+        pending: dict = {}  # ref -> (pair, key, deadline)
+        reruns: dict[tuple[int, int], int] = {}  # episodes re-run because an actor died or timed out
         bar = tqdm(total=len(todo), desc=f"{cfg.method.name} {cfg.env.name} (ray)", unit="ep", disable=not progress)
+        say = bar.write if progress else log
+
+        def rerun(pair: tuple, key: tuple[int, int], why: str) -> None:
+            """Its env actor or planner driver died (killed, OOM, node gone) or hung: the half-run episode
+            left no row, so run it again from the start on a new pair. A plan is a pure function of
+            (config, checkpoint, seed): the rerun's row is the one a fault-free run writes."""
+            n = reruns[key] = reruns.get(key, 0) + 1
+            if n > cfg.ray.max_restarts:
+                raise DeviceError(
+                    f"task {key[0]} seed {key[1]}: {why}, {n} time(s); ray.max_restarts={cfg.ray.max_restarts} "
+                    "re-runs are allowed per episode; check the nodes (`ray status`, `ray logs`), or raise "
+                    "ray.episode_timeout_s if the episodes are just slow, and rerun to resume (finished "
+                    "episodes are kept)")
+            say(f"task {key[0]} seed {key[1]}: {why}; re-running it ({n}/{cfg.ray.max_restarts})")
+            kill_quietly(pair)
+            pair = episode_pair(p, pool.actors)
+            actors.extend(pair)
+            queue.insert(0, key)
+            free.append(pair)
+
         while queue or pending:
             while queue and free:
                 pair, key = free.pop(), queue.pop(0)
-                pending[pair[0].run.remote(*key)] = (pair, key)
-            ready, _ = ray.wait(list(pending), num_returns=1)
-            pair, key = pending.pop(ready[0])
+                pending[pair[0].run.remote(*key)] = (pair, key, time.monotonic() + cfg.ray.episode_timeout_s)
+            first = min(pending, key=lambda ref: pending[ref][2])
+            ready, _ = ray.wait(list(pending), num_returns=1, timeout=max(0.0, pending[first][2] - time.monotonic()))
+            if not ready:  # alive but silent past its deadline: a hung env actor or driver
+                pair, key, _ = pending.pop(first)
+                rerun(pair, key, f"its episode ran past ray.episode_timeout_s={cfg.ray.episode_timeout_s:g}")
+                continue
+            pair, key, _ = pending.pop(ready[0])
             try:
                 row = ray.get(ready[0])
             except (RayTaskError, RayActorError) as e:
                 if not actor_lost(e):
                     raise unwrap_ray_error(e) from None
-                # The episode's env actor or planner driver died (killed, OOM, node gone): its half-run
-                # episode left no row, so run it again from the start on a new pair. A plan is a pure
-                # function of (config, checkpoint, seed): the rerun's row is the one a fault-free run writes.
-                n = reruns[key] = reruns.get(key, 0) + 1
-                if n > cfg.ray.max_restarts:
-                    raise DeviceError(
-                        f"task {key[0]} seed {key[1]}: its env actor or planner driver died {n} time(s) "
-                        f"(last: {first_line(e)}); ray.max_restarts={cfg.ray.max_restarts} re-runs are allowed per "
-                        "episode; check the nodes (`ray status`, `ray logs`) and rerun to resume (finished "
-                        "episodes are kept)") from None
-                (bar.write if progress else log)(f"task {key[0]} seed {key[1]}: an actor of its episode died "
-                                                 f"({first_line(e)}); re-running it ({n}/{cfg.ray.max_restarts})")
-                kill_quietly(pair)
-                pair = episode_pair(p, pool.actors)
-                actors += pair
-                queue.insert(0, key)
-                free.append(pair)
+                rerun(pair, key, f"an actor of its episode died ({first_line(e)})")
                 continue
             row = {**row, **provenance(p, len(pool.actors))}
             row["retries"] = int(row.get("retries", 0)) + reruns.get(key, 0)
@@ -299,15 +311,11 @@ def run_ray(p: Prepared, store: ResultStore, progress: bool = True,
             free.append(pair)
             bar.update(1)
             bar.set_postfix(success=f"{sum(r['success'] for r in rows)}/{len(rows)}")
-            (bar.write if progress else log)(describe(row))
+            say(describe(row))
         bar.close()
         return rows
     finally:
-        for a in actors:
-            try:
-                ray.kill(a, no_restart=True)
-            except Exception:  # noqa: BLE001 - already gone
-                pass
+        kill_quietly(actors)
         if pool is not None:
             pool.shutdown()
         if started:
