@@ -138,7 +138,8 @@ THREADS = "0 = torch's default; 1 when other jobs share the cores"
 class EnvConfig:
     # pointmaze-{medium,large,giant} | antmaze-{...} | cube-{single,double,triple}
     name: str = spec("pointmaze-medium", choices=ENV_NAMES)
-    protocol: str = spec("fixed", choices=PROTOCOLS)  # fixed: start/goal at cell centres (paper); ogbench: stock +-1 noise
+    # fixed: start/goal at cell centres (paper); ogbench: stock +-1 noise
+    protocol: str = spec("fixed", choices=PROTOCOLS)
     max_steps: int = spec(500, gt=0, why="env steps of one episode (500 medium/large, 1000 giant)")
     horizon: int = spec(500, gt=0, why="planning horizon in env steps (500 medium/large, 1000 giant)")
     policy: str = ""  # antmaze: low-level policy dir ("" -> checkpoints/<env>-policy); unused for pointmaze
@@ -554,7 +555,8 @@ RETIRED = {"eval.resume_mixed": "removed in session 26: a run directory never mi
 
 
 def config_from_dict(d: dict[str, Any]) -> Config:
-    """Rebuild a Config from ``Config.to_dict()`` output (checkpoint manifests, Ray payloads); RETIRED fields are dropped."""
+    """Rebuild a Config from ``Config.to_dict()`` output (checkpoint manifests, Ray payloads); RETIRED fields
+    are dropped."""
     d = {k: dict(v) if isinstance(v, dict) else v for k, v in d.items()}
     for key in RETIRED:
         group, _, name = key.partition(".")

@@ -5,8 +5,8 @@
     python jobs/bench_denoiser.py samples=100 A B                  # 100 plans per task start (default 20)
     python jobs/bench_denoiser.py --throughput options=fp32,bf16,compiled,bf16+compiled   # speed per option
     python jobs/bench_denoiser.py --precision checkpoints/pointmaze-medium-h1   # why plans warp
-    python jobs/bench_denoiser.py --cube checkpoints/cube-single-h5   # cube models (also picked out of the default list)
-    python jobs/bench_denoiser.py --cube data.episodes=300 A B   # key=value overrides every checkpoint's config (one val split)
+    python jobs/bench_denoiser.py --cube checkpoints/cube-single-h5   # cube models (also in the default list)
+    python jobs/bench_denoiser.py --cube data.episodes=300 A B   # key=value overrides every config (one val split)
 
 Quality, per checkpoint: validation loss (manifest), then 100 unguided and 100 guided plans
 (20 per task start, full pyramid schedule = plain Diffusion Forcing sampling; Diffuser
@@ -85,7 +85,8 @@ def cube_lines(ckpts: list[Path], overrides: list[str] = ()) -> list[str]:
         r = cube_plan_quality(ckpt, cube_config(ckpt, list(overrides)))
         for who in ("model", "data"):
             q = r[who]
-            lines.append(f"| {r['checkpoint']} | {r['steps']} | {r['val_loss']:.4f} | {r['train_h']:.2f} | {r['warp']:.2f} | "
+            lines.append(f"| {r['checkpoint']} | {r['steps']} | {r['val_loss']:.4f} | {r['train_h']:.2f} | "
+                         f"{r['warp']:.2f} | "
                          f"{who} | {100 * q['no_warp']:.0f}% | {100 * q['supported_end']:.0f}% | "
                          f"{100 * q['one_mover']:.0f}% | {100 * q['moved']:.0f}% | "
                          f"{q['boundary_step']:.3f} / {q['inside_step']:.3f} | {q['max_step']:.2f} |")
@@ -232,7 +233,8 @@ def main(argv: list[str]) -> None:
             raise SystemExit(f"bench_denoiser --throughput: clock={kw['clock']!r} is not one of {', '.join(CLOCKS)}")
         opts = tuple(kw.get("options", "fp32,bf16").split(","))
         if unknown or not set(opts) <= set(OPTIONS):
-            raise SystemExit(f"bench_denoiser --throughput: unknown {sorted(unknown) or sorted(set(opts) - set(OPTIONS))}; "
+            raise SystemExit(f"bench_denoiser --throughput: unknown "
+                             f"{sorted(unknown) or sorted(set(opts) - set(OPTIONS))}; "
                              f"options are {', '.join(OPTIONS)}")
         ints = lambda k, d: tuple(int(v) for v in kw.get(k, d).split(","))  # noqa: E731
         print("guided transitions/s (jobs x transitions per second) and utilisation, one run:")
@@ -251,11 +253,14 @@ def main(argv: list[str]) -> None:
     # every shipped planning model (DF or Diffuser); other checkpoints (the ant expert) have no model_kind
     words = dict(a.split("=", 1) for a in argv if "=" in a)  # samples=N: plans per task start (default 20)
     if set(words) - {"samples"}:
-        raise SystemExit(f"bench_denoiser: unknown {sorted(set(words) - {'samples'})}; the quality mode takes samples=N")
+        raise SystemExit(f"bench_denoiser: unknown {sorted(set(words) - {'samples'})}; "
+                         f"the quality mode takes samples=N")
     per_task = int(words.get("samples", SAMPLES_PER_TASK))
-    ckpts = [Path(a) for a in argv if "=" not in a] or sorted(p.parent for p in (REPO_ROOT / "checkpoints").glob("*/manifest.json")
-                                              if "model_kind" in json.loads(p.read_text()))
-    cubes = [c for c in ckpts if family(json.loads((c / "manifest.json").read_text())["config"]["env"]["name"]) == "cube"]
+    ckpts = [Path(a) for a in argv if "=" not in a] or sorted(
+        p.parent for p in (REPO_ROOT / "checkpoints").glob("*/manifest.json")
+        if "model_kind" in json.loads(p.read_text()))
+    cubes = [c for c in ckpts
+             if family(json.loads((c / "manifest.json").read_text())["config"]["env"]["name"]) == "cube"]
     ckpts = [c for c in ckpts if c not in cubes]
     if cubes:
         print("\n".join(cube_lines(cubes)) + "\n")
@@ -265,8 +270,10 @@ def main(argv: list[str]) -> None:
     print("|---|---|---|---|---|---|---|---|")
     for ckpt in ckpts:
         r = plan_quality(ckpt, samples_per_task=per_task)
-        print(f"| {r['checkpoint']} | {r['steps']} | {r['params']:,} | {r['val_loss'] if r['val_loss'] is None else round(r['val_loss'], 4)} | {r['train_h']:.2f} | "
-              f"{100 * r['unguided_no_warp']:.0f}% / {100 * r['unguided_in_free']:.1f}% / {100 * r['unguided_valid']:.0f}% | "
+        print(f"| {r['checkpoint']} | {r['steps']} | {r['params']:,} | "
+              f"{r['val_loss'] if r['val_loss'] is None else round(r['val_loss'], 4)} | {r['train_h']:.2f} | "
+              f"{100 * r['unguided_no_warp']:.0f}% / {100 * r['unguided_in_free']:.1f}% / "
+              f"{100 * r['unguided_valid']:.0f}% | "
               f"{100 * r['guided_no_warp']:.0f}% / {100 * r['guided_in_free']:.1f}% / {100 * r['guided_valid']:.0f}% / "
               f"{100 * r['guided_near_goal']:.0f}% | {r['guided_boundary_step']:.2f} / {r['guided_inside_step']:.2f} |")
 

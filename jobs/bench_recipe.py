@@ -209,7 +209,8 @@ def table(rows: list[dict[str, Any]], arms: dict[str, Arm]) -> str:
             f"| {r['arm']} | {arms[r['arm']].label} | {r['train_steps']} | {r['samples_per_s']:.0f} | "
             f"{r['val_loss']:.4f} | {p['x0_rms']:.3f} | {p['boundary_mean']:.2f} / {p['boundary_max']:.2f} | "
             f"{p['inside_mean']:.2f} / {p['inside_max']:.2f} | {100 * r['unguided_no_warp']:.0f}% / "
-            f"{100 * r['unguided_in_free']:.1f}% | {100 * r['guided_no_warp']:.0f}% / {100 * r['guided_in_free']:.1f}% / "
+            f"{100 * r['unguided_in_free']:.1f}% | {100 * r['guided_no_warp']:.0f}% / "
+            f"{100 * r['guided_in_free']:.1f}% / "
             f"{100 * r['guided_near_goal']:.0f}% | {r['guided_boundary_step']:.2f} / {r['guided_inside_step']:.2f} | "
             f"{r['fast_mctd_success']}/{r['fast_mctd_episodes']} | {r['fast_mctd_plan_s']:.1f} | "
             f"{'?' if r.get('core_share') is None else format(r['core_share'], '.2f')} |")

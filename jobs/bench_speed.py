@@ -118,7 +118,8 @@ def main(argv: list[str]) -> int:
         t = np.array([r["plan_time_s"] for r in rs])
         share = np.sum([r["denoise_time_s"] for r in rs]) / max(t.sum(), 1e-12)
         timed_out = sum(r["timed_out"] for r in rs)
-        print(f"| {m} | {100 * np.mean([r['success'] for r in rs]):.0f}{f' ({timed_out} timed out)' if timed_out else ''} | "
+        print(f"| {m} | {100 * np.mean([r['success'] for r in rs]):.0f}"
+              f"{f' ({timed_out} timed out)' if timed_out else ''} | "
               f"{t.mean():.2f} ± {t.std():.2f} | "
               f"{t.mean() / ref_time:.1f}x | {100 * share:.1f}% | {np.mean([r['expansions'] for r in rs]):.0f} | "
               f"{np.mean([r['iterations'] for r in rs]):.1f} |")

@@ -50,7 +50,8 @@ def size_report(repo: Path) -> tuple[int, list[str]]:
     total = sum(per_top.values())
     state = "slim (checkpoints/ left behind)" if is_slim(repo) else "full"
     lines = [f"travels: {total / 2**20:.1f} MiB of {LIMIT / 2**20:.0f} MiB allowed ({state}): "
-             + ("fits" if total <= LIMIT else f"too big; `python3 jobs/device_tree.py slim` leaves {LEFT_BEHIND}/ behind")]
+             + ("fits" if total <= LIMIT
+                else f"too big; `python3 jobs/device_tree.py slim` leaves {LEFT_BEHIND}/ behind")]
     lines += [f"  {b / 2**20:8.1f} MiB  {top}" for top, b in sorted(per_top.items(), key=lambda kv: -kv[1])[:8]]
     return total, lines
 

@@ -47,7 +47,8 @@ def step(name: str, cmd: list[str], env: dict[str, str], out: Path) -> bool:
     t0 = time.time()
     try:
         p = subprocess.run(cmd, cwd=REPO, env=env, capture_output=True, text=True, timeout=LIMITS_S[name])
-        text, ok = p.stdout + (f"\n(exit {p.returncode})\n{p.stderr[-2000:]}" if p.returncode else ""), p.returncode == 0
+        text, ok = p.stdout + (f"\n(exit {p.returncode})\n{p.stderr[-2000:]}"
+                               if p.returncode else ""), p.returncode == 0
     except subprocess.TimeoutExpired as e:
         text, ok = (e.stdout or b"").decode() if isinstance(e.stdout, bytes) else (e.stdout or ""), False
         text += f"\n(stopped after its {LIMITS_S[name]} s limit)\n"

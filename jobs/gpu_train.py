@@ -121,7 +121,8 @@ def install(env: dict[str, str]) -> dict[str, str]:
 
 def _missing(modules: tuple[str, ...], env: dict[str, str]) -> list[str]:
     probe = "import importlib.util as u, sys; print(' '.join(m for m in sys.argv[1:] if u.find_spec(m) is None))"
-    return subprocess.run([sys.executable, "-c", probe, *modules], env=env, capture_output=True, text=True).stdout.split()
+    return subprocess.run([sys.executable, "-c", probe, *modules], env=env, capture_output=True,
+                          text=True).stdout.split()
 
 
 def start(name: str, cmd: list[str], env: dict[str, str], logs: Path) -> subprocess.Popen:

@@ -38,8 +38,10 @@ with torch.no_grad():
     xs = xt.clone(); xs[:, 0] = xt.roll(1, 0)[:, 0]
     ps = model(xs, kk)
     mv = ((ps - pred)[:, 1].numpy() * std); dstart = ((x0.roll(1,0)[:,0]-x0[:,0]).numpy()*std)
-    print(f"k {k:3d}: err frame1 {err[:,1].mean():.2f} frame2 {err[:,2].mean():.2f} mid {err[:,250].mean():.2f} last {err[:,-1].mean():.2f}; "
-          f"start moved {np.linalg.norm(dstart,axis=1).mean():.2f} -> frame1 moved {np.linalg.norm(mv,axis=1).mean():.2f}")
+    print(f"k {k:3d}: err frame1 {err[:,1].mean():.2f} frame2 {err[:,2].mean():.2f} mid {err[:,250].mean():.2f} "
+          f"last {err[:,-1].mean():.2f}; "
+          f"start moved {np.linalg.norm(dstart,axis=1).mean():.2f} -> "
+          f"frame1 moved {np.linalg.norm(mv,axis=1).mean():.2f}")
 
 # What that does to plans: the first step of a guided plan (start -> plan frame 1) and the largest
 # step after it, per task, for noise seeds 0-2 (the warp threshold is 1.0).

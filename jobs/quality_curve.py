@@ -88,13 +88,17 @@ def table(run: Path, rows: list[tuple[str, dict[str, Any]]]) -> str:
     num = lambda v: "-" if v is None else f"{v:.4g}"  # noqa: E731
     hours = lambda v: "?" if v is None else f"{v:.2f}"  # noqa: E731
     millions = lambda v: "?" if v is None else f"{v / 1e6:.1f}M"  # noqa: E731
-    lines = [f"{run}:", "| snapshot | steps (with ancestors) | samples with ancestors | CPU h (with ancestors) | val loss | unguided no warp | "
-             "guided no warp | guided valid (no warp, no wall) | guided: warp at the first step | guided first step | guided boundary step | "
+    lines = [f"{run}:", "| snapshot | steps (with ancestors) | samples with ancestors | CPU h (with ancestors) | "
+             "val loss | unguided no warp | guided no warp | guided valid (no warp, no wall) | "
+             "guided: warp at the first step | guided first step | guided boundary step | "
              "x0 error (t=19) | boundary max (t=19) |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for name, r in rows:
-        lines.append(f"| {name} | {r['steps']} ({r['total_steps']}) | {millions(r.get('total_samples'))} | {r['cpu_h']:.2f} ({hours(r['total_cpu_h'])}) | {num(r['val_loss'])} | {pct(r['unguided_no_warp'])} | "
-                     f"{pct(r.get('guided_no_warp'))} | {pct(r.get('guided_valid'))} | {pct(r.get('guided_first_warp'))} | {num(r.get('guided_first_step'))} | "
+        lines.append(f"| {name} | {r['steps']} ({r['total_steps']}) | {millions(r.get('total_samples'))} | "
+                     f"{r['cpu_h']:.2f} ({hours(r['total_cpu_h'])}) | {num(r['val_loss'])} | "
+                     f"{pct(r['unguided_no_warp'])} | "
+                     f"{pct(r.get('guided_no_warp'))} | {pct(r.get('guided_valid'))} | "
+                     f"{pct(r.get('guided_first_warp'))} | {num(r.get('guided_first_step'))} | "
                      f"{num(r.get('guided_boundary_step'))} | {num(r.get('x0_rms'))} | "
                      f"{num(r.get('boundary_max'))} |")
     return "\n".join(lines)

@@ -3,7 +3,7 @@
     python jobs/make_dataset.py env=pointmaze-medium                     # states + actions (once)
     python jobs/render_frames.py env=visual-pointmaze-medium             # 20,000 frames (visual.frames)
     python jobs/render_frames.py env=visual-pointmaze-large visual.frames=2000 visual.frames_seed=1
-    python jobs/render_frames.py env=visual-pointmaze-medium visual.shadowsize=4096   # the reference frames, 2-4x slower
+    python jobs/render_frames.py env=visual-pointmaze-medium visual.shadowsize=4096   # reference, 2-4x slower
 
 Writes data/<env>-frames-seed<s>-n<N>-shadow<k>-data<seed>-<E>x<S>/ (frames.npz: N train frames and
 N x data.val_fraction validation frames; manifest.json: seed, frame indices, dataset digests,

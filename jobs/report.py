@@ -99,7 +99,8 @@ def main(argv: list[str]) -> int:
             if rs:
                 plot_episode(rs[0], maze_geometry(env), figures / f"plan_{env}.png")
 
-    every_shipped = {json.loads(m.read_text()).get("digest") for m in (REPO_ROOT / "checkpoints").glob("*/manifest.json")}
+    every_shipped = {json.loads(m.read_text()).get("digest")
+                     for m in (REPO_ROOT / "checkpoints").glob("*/manifest.json")}
     for ab in ABLATIONS:
         rows = merge_rows(committed, fresh, ab.name)
         all_rows += rows
@@ -135,7 +136,8 @@ def main(argv: list[str]) -> int:
         pq.write_table(pa.table({k: [r.get(k) for r in all_rows] for k in keys}), lean_path)  # union of columns
     for name, body in sections.items():
         print(f"## {name}\n{body}\n")
-    print(f"{len(all_rows)} rows ({len(fresh)} fresh from {root}, the rest from {lean_path.name}); updated {len(sections)} blocks in "
+    print(f"{len(all_rows)} rows ({len(fresh)} fresh from {root}, the rest from {lean_path.name}); "
+          f"updated {len(sections)} blocks in "
           f"{doc.relative_to(REPO_ROOT) if doc.is_relative_to(REPO_ROOT) else doc}; figures in {figures}")
     return 0
 

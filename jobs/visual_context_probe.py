@@ -63,7 +63,8 @@ def main(argv: list[str]) -> int:
         if nxt is not None:
             s["real"].append(float(np.linalg.norm(pos(nxt[None])[0] - xy[0])))
             s["real_z"].append(float(np.linalg.norm(norm.normalise(nxt[None]) - norm.normalise(z[None]))))
-    print(f"{cfg.checkpoint_dir()} ({manifest['digest']}, {manifest.get('train_steps')} steps); unguided DF, jump {jump}")
+    print(f"{cfg.checkpoint_dir()} ({manifest['digest']}, {manifest.get('train_steps')} steps); "
+          f"unguided DF, jump {jump}")
     print("| start | plans | first plan step: estimated units / latent units | recorded next frame: estimated / latent "
           "| largest estimated step | median step at token boundaries / inside tokens |\n|---|---|---|---|---|---|")
     for kind, s in stats.items():

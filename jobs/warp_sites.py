@@ -101,7 +101,8 @@ def lines(r: dict[str, Any]) -> list[str]:
                    f"{' / '.join(pct(v) for v in s['per_task'])} |")
     v, c = r["val_starts"], r["cell_centres"]
     out.append(f"first step (unguided) from {v['n']} validation starts: median {v['median']:.2f} "
-               f"(the data's next frame: {v['data_median']:.2f}), p90 {v['p90']:.2f}, over the limit {pct(v['over_warp'])}; "
+               f"(the data's next frame: {v['data_median']:.2f}), p90 {v['p90']:.2f}, "
+               f"over the limit {pct(v['over_warp'])}; "
                f"from the {c['n']} free cell centres: median {c['median']:.2f}, p90 {c['p90']:.2f}, "
                f"over the limit {pct(c['over_warp'])}")
     return out

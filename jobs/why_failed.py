@@ -46,7 +46,8 @@ def print_maze(d: Path, rows: list[dict]) -> None:
     for f in fails:
         print(f"  task {f['task']} seed {f['seed']}: {f['status']}, plan {f['plan_len']} steps ending "
               f"{f['plan_end_to_goal']:.1f} from the goal, {100 * f['plan_in_free']:.1f}% in free cells; "
-              f"closest approach {f['closest']:.2f} in {f['steps']} steps{', then stood still' if f['stopped'] else ''}")
+              f"closest approach {f['closest']:.2f} in {f['steps']} steps"
+              f"{', then stood still' if f['stopped'] else ''}")
     cut = sum(f["plan_in_free"] < 1.0 for f in fails)
     still = sum(f["stopped"] for f in fails)
     print(f"  {cut} of {len(fails)} failed first plans cut through a wall; {still} robots stood still at the end")

@@ -10,7 +10,8 @@ from fmctd_dist.errors import ConfigError
 
 def test_groups_and_overrides():
     cfg = load_config(["env=pointmaze-giant", "method=p-mctd", "method.parallel=50", "tasks=[2,3]", "runner=ray"])
-    assert (cfg.env.name, cfg.env.horizon, cfg.data.episodes, cfg.data.episode_steps) == ("pointmaze-giant", 1000, 500, 2001)
+    assert ((cfg.env.name, cfg.env.horizon, cfg.data.episodes, cfg.data.episode_steps)
+            == ("pointmaze-giant", 1000, 500, 2001))
     assert (cfg.method.name, cfg.method.parallel, cfg.jump) == ("p-mctd", 50, 1)
     assert cfg.eval.tasks == [2, 3] and cfg.eval.runner == "ray"
     assert cfg.plan_tokens == 100 and cfg.n_tokens == 101

@@ -250,7 +250,8 @@ def run_grid(args: list[str], tmp_path, runner: str) -> list[dict]:
 
 def check_row(row: dict, searched: bool = True) -> None:
     assert row["env"] == "cube-double" and row["env_steps"] == 100 and row["n_cubes"] == 2
-    assert row["plans"] >= 2 and (row["expansions"] > 0) == searched  # a replan every 10 policy steps after the 30 scripted ones
+    # a replan every 10 policy steps after the 30 scripted ones
+    assert row["plans"] >= 2 and (row["expansions"] > 0) == searched
     assert len(row["traj_cubes"]) == 101 * 6 and len(row["traj_effector"]) == 101 * 3
     assert row["targets"] and set(row["targets"].split(",")) <= {"0", "1"}
     assert row["why_failed"] in ("", "time out", "wrong cube", "dropped", "stack knocked over")
@@ -345,9 +346,10 @@ def test_a_missing_cube_diffuser_is_one_error_naming_its_training_command(tmp_pa
     from fmctd_dist.config import REPO_ROOT
 
     missing = tmp_path / "cube-single-diffuser"
-    out = subprocess.run([sys.executable, "jobs/eval.py", "env=cube-single", f"method={method}", f"checkpoint={missing}",
-                          "runner=local", "tasks=[1]", "seeds=[0]", f"eval.out={tmp_path}"], cwd=REPO_ROOT,
-                         capture_output=True, text=True, timeout=300, env={**os.environ, "OMP_NUM_THREADS": "1"})
+    out = subprocess.run([sys.executable, "jobs/eval.py", "env=cube-single", f"method={method}",
+                          f"checkpoint={missing}", "runner=local", "tasks=[1]", "seeds=[0]", f"eval.out={tmp_path}"],
+                         cwd=REPO_ROOT, capture_output=True, text=True, timeout=300,
+                         env={**os.environ, "OMP_NUM_THREADS": "1"})
     err = out.stderr.strip()
     assert out.returncode == 2 and err.startswith("error: ") and "\n" not in err and "Traceback" not in err
     assert f"{missing} does not exist" in err

@@ -96,7 +96,8 @@ def test_window_shapes_and_subsampling(tiny_dataset, jump, tokens):
     w = data.train.windows(np.array([7]))[0]
     frames = ds.normaliser.unnormalise(tokens_to_frames(w[1:], 10))
     np.testing.assert_allclose(frames, ds.train[0, 7 + jump : 7 + 101 : jump], atol=1e-5)
-    np.testing.assert_allclose(ds.normaliser.unnormalise(w[0].reshape(10, 2)), np.repeat(ds.train[0, 7:8], 10, 0), atol=1e-5)
+    np.testing.assert_allclose(ds.normaliser.unnormalise(w[0].reshape(10, 2)), np.repeat(ds.train[0, 7:8], 10, 0),
+                               atol=1e-5)
     assert data.train.n_windows == 8 * 201  # every offset, never materialised
     v1, v2 = data.val_batches(2, 3), data.val_batches(2, 3)
     assert all((a == b).all() for a, b in zip(v1, v2))
@@ -141,8 +142,9 @@ def test_start_balance_weights_depend_on_the_start_cell_only():
 def test_start_balance_oversamples_rare_starts_and_zero_is_the_uniform_sampler(tiny_dataset):
     cfg, _ = tiny_dataset
     base = TINY_DATA + [f"data.root={cfg.data.root}"]
-    plain, bal = (train_data(c, load_dataset(c)) for c in (load_config(base, method="mctd"),
-                                                            load_config(base + ["train.start_balance=1"], method="mctd")))
+    plain, bal = (train_data(c, load_dataset(c))
+                  for c in (load_config(base, method="mctd"),
+                            load_config(base + ["train.start_balance=1"], method="mctd")))
     # balance 0 draws exactly as before (rng.integers): bitwise the same batch as the uniform sampler
     ref = plain.train.windows(np.random.default_rng(3).integers(0, plain.train.n_windows, size=64))
     np.testing.assert_array_equal(plain.sample(np.random.default_rng(3), 64), ref)

@@ -64,7 +64,8 @@ def test_ant_set_dry_run_makes_its_data_with_workers_and_fine_tunes(tmp_path):
     assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
     with tarfile.open(out / "antmaze-medium-h5.tar") as tar:
         manifest = json.load(tar.extractfile("antmaze-medium-h5/manifest.json"))
-    assert manifest["config"]["env"]["name"] == "antmaze-medium" and manifest["config"]["train"]["boundary_weight"] == 3.0
+    assert (manifest["config"]["env"]["name"] == "antmaze-medium"
+            and manifest["config"]["train"]["boundary_weight"] == 3.0)
     data = json.loads(next((tmp_path / "runs" / "data").glob("antmaze-medium-*/manifest.json")).read_text())
     assert data["generation"]["workers"] == 2
 
@@ -87,14 +88,16 @@ def test_visual_set_dry_run_trains_on_a_carried_store_without_making_data(tmp_pa
     the options (here the 20-episode store and the repo's data root) override the set's."""
     out = tmp_path / "out"
     cmd = [sys.executable, "jobs/gpu_train.py", str(out), "--dry-run", "--set", "visual", "--only",
-           "visual-pointmaze-medium-h5", "--runs", str(tmp_path / "runs"), "visual.episodes=20", f"data.root={REPO / 'data'}"]
+           "visual-pointmaze-medium-h5", "--runs", str(tmp_path / "runs"), "visual.episodes=20",
+           f"data.root={REPO / 'data'}"]
     done = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=600,
                           env={**os.environ, "OMP_NUM_THREADS": "1"})
     assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
     with tarfile.open(out / "visual-pointmaze-medium-h5.tar") as tar:
         manifest = json.load(tar.extractfile("visual-pointmaze-medium-h5/manifest.json"))
     assert manifest["config"]["env"]["name"] == "visual-pointmaze-medium" and manifest["token_dim"] == 80
-    assert manifest["latents"]["vae_digest"] and not (tmp_path / "runs" / "logs" / "data-visual-pointmaze-medium.log").exists()
+    assert manifest["latents"]["vae_digest"] and not (tmp_path / "runs" / "logs"
+                                                      / "data-visual-pointmaze-medium.log").exists()
 
 
 def test_visual_set_continues_the_shipped_visual_models():

@@ -2,8 +2,8 @@
 
 import pytest
 
-from fmctd_dist.evaluation.report import ABLATIONS, ANT_ENV_ORDER, CUBE_ENV_ORDER, CUBE_METHOD_ORDER, ablation_summary, \
-    ablation_table, current_rows, fill_markers, glance_table, load_rows, maze_table, merge_rows
+from fmctd_dist.evaluation.report import ABLATIONS, ANT_ENV_ORDER, CUBE_ENV_ORDER, CUBE_METHOD_ORDER, \
+    ablation_summary, ablation_table, current_rows, fill_markers, glance_table, load_rows, maze_table, merge_rows
 from fmctd_dist.evaluation.results import ResultStore
 
 
@@ -27,7 +27,8 @@ def test_ablation_groups_by_the_recorded_knob_not_the_run_name():
     rows = [row(k, s, k != 1 or v == 10, t=float(v), parallel=v) for v in (1, 10, 200) for k in (1, 2) for s in (0, 1)]
     summary = ablation_summary(rows, "parallel")
     assert [s["value"] for s in summary] == [1, 10, 200]
-    assert [s["success"] for s in summary] == [50, 100, 50] and [s["plan_time_s"] for s in summary] == [1.0, 10.0, 200.0]
+    assert ([s["success"] for s in summary] == [50, 100, 50]
+            and [s["plan_time_s"] for s in summary] == [1.0, 10.0, 200.0])
     ab = next(a for a in ABLATIONS if a.knob == "parallel")
     table = ablation_table(ab, rows)
     assert "| 1 | fast-mctd / giant | 4 (2 x 2) | 50 ± 0 | 1.00 ± 0.00 | 0.01x |" in table  # K=1 is not "True"
@@ -237,7 +238,8 @@ def test_glance_table_shows_todays_largest_line_per_cell_beside_the_paper():
                 "episode_time_limit": 0.0}
 
     rows = ([r(k, s, k != 5 or s < 6, "fast-mctd", "pointmaze-giant", "new") for k in range(1, 6) for s in range(10)]
-            + [r(k, 0, False, "fast-mctd", "pointmaze-giant", "old") for k in range(1, 6)]  # older and smaller: not shown
+            # older and smaller: not shown
+            + [r(k, 0, False, "fast-mctd", "pointmaze-giant", "old") for k in range(1, 6)]
             + [r(k, s, True, "s-mctd", "pointmaze-giant", "old") for k in (1, 2) for s in (0, 1)]
             + [r(1, 0, True, "fast-mctd-replan", "cube-single", "new")])
     shipped = {("fast-mctd", "pointmaze-giant"): "new", ("s-mctd", "pointmaze-giant"): "new",

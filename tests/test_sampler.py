@@ -270,8 +270,8 @@ def test_resampled_ladder_is_bitwise_invariant_to_batching():
     mixed[:, 1, 2] = 7  # row 0 -> 1: token 2 goes up while the others go down
     with pytest.raises(ValueError, match="both re-noises some tokens and denoises others"):
         den.denoise(DenoiseBatch(x, mixed, batch.scale, start, goal, batch.noise_seed))
-    merged = concat_batches([batch.take(np.array([0])), DenoiseBatch(x[1:], lv[1:], batch.scale[1:], start[1:], goal[1:],
-                                                                     np.array([12, 13]))])
+    merged = concat_batches([batch.take(np.array([0])),
+                             DenoiseBatch(x[1:], lv[1:], batch.scale[1:], start[1:], goal[1:], np.array([12, 13]))])
     np.testing.assert_array_equal(merged.noise_seed, [11, 12, 13])
 
 

@@ -164,7 +164,8 @@ def test_lineage_of_a_manifest_from_before_the_field():
 
     old_child = {"train_steps": 3654, "cpu_time_s": 2100.0, "init_from": {"digest": "9c01", "train_steps": 6000}}
     assert lineage(old_child) == {"lineage_steps": 9654, "lineage_cpu_s": None, "lineage_samples": None}
-    assert lineage({"train_steps": 10, "wall_time_s": 5.0}) == {"lineage_steps": 10, "lineage_cpu_s": 5.0, "lineage_samples": None}
+    assert lineage({"train_steps": 10, "wall_time_s": 5.0}) == {"lineage_steps": 10, "lineage_cpu_s": 5.0,
+                                                                "lineage_samples": None}
 
 
 def test_lineage_reads_an_ancestor_still_on_disk(tmp_path):

@@ -240,7 +240,8 @@ def test_context_probe_prints_a_row_per_start_kind(monkeypatch, capsys):
     monkeypatch.setattr(probe, "WINDOWS", 2)
     with torch_threads(1):
         assert probe.main(["tasks=[3]"]) == 0
-    rows = [ln.split(" | ") for ln in capsys.readouterr().out.splitlines() if ln.startswith(("| validation", "| reset"))]
+    rows = [ln.split(" | ") for ln in capsys.readouterr().out.splitlines()
+            if ln.startswith(("| validation", "| reset"))]
     assert [(r[0], r[1]) for r in rows] == [("| validation", "2"), ("| reset", "1")]
     assert rows[1][3] == "–" and float(rows[0][3].split(" / ")[0]) < 2.5  # a real 5-step move is at most ~2.5 units
     boundary, inside = (float(v) for v in rows[0][5].rstrip(" |").split(" / "))

@@ -59,7 +59,8 @@ def read_expert_manifest(ckpt_dir: str | Path) -> dict[str, Any]:
         what = manifest.get("kind") or manifest.get("model_kind") or "unknown"
         raise CheckpointError(
             f"ant expert: {ckpt_dir} holds a {what!r} checkpoint (manifest kind={what!r}), not an ant direction "
-            f"expert (kind={KIND!r}); point to the dir written by jobs/train_expert.py, or {train_fix(ckpt_dir, broken=True)}"
+            f"expert (kind={KIND!r}); point to the dir written by jobs/train_expert.py, or "
+            f"{train_fix(ckpt_dir, broken=True)}"
         )
     return manifest
 
@@ -106,5 +107,6 @@ def load_expert(ckpt_dir: str | Path, obs_dim: int = OBS_DIM, act_dim: int = ACT
         actor = Actor(manifest["obs_dim"], manifest["act_dim"], list(cfg.sac.hidden))
         actor.load_state_dict(torch.load(ckpt_dir / MODEL_FILE, map_location="cpu", weights_only=True), strict=True)
     except Exception as e:  # noqa: BLE001 - any unpickling/shape/config failure means a bad checkpoint
-        raise CheckpointError(f"ant expert {ckpt_dir}: {MODEL_FILE} does not load ({first_line(e)}); {train_fix(ckpt_dir, broken=True)}") from None
+        raise CheckpointError(f"ant expert {ckpt_dir}: {MODEL_FILE} does not load ({first_line(e)}); "
+                              f"{train_fix(ckpt_dir, broken=True)}") from None
     return AntExpert(actor, manifest, ckpt_dir)

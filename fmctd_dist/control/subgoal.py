@@ -3,8 +3,8 @@
 The ant cannot be driven by a PD law on positions; a low-level policy gets the ant state plus
 a 2-D subgoal instead (the cube policy: its cube's planned xyz, ``dim=3``). The subgoal is
 the plan point ``interval`` steps ahead, moved another ``interval`` along the plan each time
-the agent comes within ``radius`` of it, and held at the plan's last point once past the end. Unlike the PD controller this is closed loop in
-space, not in time: a slow ant keeps its subgoal until it gets there.
+the agent comes within ``radius`` of it, and held at the plan's last point once past the end. Unlike
+the PD controller this is closed loop in space, not in time: a slow ant keeps its subgoal until it gets there.
 """
 
 from __future__ import annotations

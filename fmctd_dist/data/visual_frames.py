@@ -205,5 +205,6 @@ def load_frames(cfg: Config, split: str = "train",
                                        f"{pre}frame_index": (np.int64, (n,))},
                  f"delete {path} and rerun jobs/render_frames.py")
     if z[f"{pre}frame_index"].tolist() != m[f"{pre}frame_index"]:
-        raise DatasetError(f"{path / 'frames.npz'}: {pre}frame_index differs from its manifest; delete {path} and rerun")
+        raise DatasetError(f"{path / 'frames.npz'}: {pre}frame_index differs from its manifest; "
+                           f"delete {path} and rerun")
     return z[f"{pre}images"], z[f"{pre}frame_index"], m

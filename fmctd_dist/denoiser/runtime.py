@@ -87,7 +87,8 @@ def option_settings(name: str) -> tuple[str, bool]:
 def option_overrides(name: str) -> list[str]:
     """Config overrides of an option name (:func:`option_settings`)."""
     precision, compile = option_settings(name)
-    return (["diffusion.precision=bf16"] if precision == "bf16" else []) + (["diffusion.compile=true"] if compile else [])
+    return ((["diffusion.precision=bf16"] if precision == "bf16" else [])
+            + (["diffusion.compile=true"] if compile else []))
 
 
 def check_compile(compile: bool, device: str) -> None:

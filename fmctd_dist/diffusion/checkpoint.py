@@ -36,7 +36,8 @@ TRAIN_STATE_FILE = "train_state.pt"
 FORMAT_VERSION = 1
 MODEL_FIELDS = ("kind", "frame_stack", "width", "layers", "heads", "ff", "param", "norm")
 UNET_FIELDS = ("unet_channels", "unet_kernel", "unet_padding", "unet_edge_frames")  # checked when kind=diffuser
-SHAPE_FREE_FIELDS = ("unet_padding", "unet_edge_frames")  # fields a state_dict does not depend on: train.init_from may change them
+# fields a state_dict does not depend on: train.init_from may change them
+SHAPE_FREE_FIELDS = ("unet_padding", "unet_edge_frames")
 # the noise schedule the weights were trained under: a sampler built on another one asks the model about noise
 # levels it never saw, with no error of its own
 DIFFUSION_FIELDS = ("timesteps", "beta_schedule", "beta_start", "beta_end")
@@ -421,7 +422,8 @@ def lineage(manifest: dict[str, Any], _seen: frozenset[Path] = frozenset()) -> d
     parent_samples = parent.get("lineage_samples") if parent else 0
     return {"lineage_steps": steps + int(parent_steps),
             "lineage_cpu_s": None if cpu is None or parent_cpu is None else float(cpu) + float(parent_cpu),
-            "lineage_samples": None if batch is None or parent_samples is None else steps * int(batch) + int(parent_samples)}
+            "lineage_samples": None if batch is None or parent_samples is None
+                               else steps * int(batch) + int(parent_samples)}
 
 
 def _ancestor_manifest(parent: dict[str, Any]) -> Path | None:
@@ -445,7 +447,8 @@ def _ancestor_manifest(parent: dict[str, Any]) -> Path | None:
 def _manifests_by_digest() -> dict[str, list[Path]]:
     """digest -> manifest paths under checkpoints/ and runs/ (read once per process)."""
     index: dict[str, list[Path]] = {}
-    for root, pattern in ((REPO_ROOT / "checkpoints", f"*/{MANIFEST_FILE}"), (REPO_ROOT / "runs", f"**/{MANIFEST_FILE}")):
+    for root, pattern in ((REPO_ROOT / "checkpoints", f"*/{MANIFEST_FILE}"),
+                          (REPO_ROOT / "runs", f"**/{MANIFEST_FILE}")):
         for path in sorted(root.glob(pattern)) if root.is_dir() else []:
             try:
                 digest = json.loads(path.read_text()).get("digest")

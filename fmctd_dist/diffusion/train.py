@@ -171,7 +171,8 @@ def vs_paper(cfg: Config, step: int) -> str:
     paper = PAPER_TRAINING[cfg.model.kind]
     seen = step * cfg.train.batch_size
     parts = [f"{step} of the paper's {paper['steps']} steps at batch {cfg.train.batch_size} (paper "
-             f"{paper['batch_size']}): {seen:,} training windows, {100 * seen / (paper['steps'] * paper['batch_size']):.1f}%"
+             f"{paper['batch_size']}): {seen:,} training windows, "
+             f"{100 * seen / (paper['steps'] * paper['batch_size']):.1f}%"
              " of the paper's"]
     if "unet_channels" in paper and list(cfg.model.unet_channels) != paper["unet_channels"]:
         parts.append(f"U-Net channels {list(cfg.model.unet_channels)} (paper {paper['unet_channels']})")

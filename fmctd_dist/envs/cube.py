@@ -108,7 +108,8 @@ class CubeReset:
 
 
 class CubeEpisodes:
-    """One ``cube-*`` env in OGBench's task mode: ``reset(task_id, seed)``, then ``step(action [5]) -> (obs, success)``."""
+    """One ``cube-*`` env in OGBench's task mode: ``reset(task_id, seed)``, then
+    ``step(action [5]) -> (obs, success)``."""
 
     def __init__(self, name: str):
         self._env = make_cube_env(name)

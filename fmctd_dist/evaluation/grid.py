@@ -72,7 +72,8 @@ def missing(p: Prepared, store: ResultStore, log: Callable[[str], None] = print)
     for line in store.report():
         log(line)
     key = (p.config_hash, p.checkpoint_digest, p.policy_digest)
-    foreign = [r for r in rows if (r.get("config_hash"), r.get("checkpoint_digest"), r.get("policy_digest") or "") != key]
+    foreign = [r for r in rows
+               if (r.get("config_hash"), r.get("checkpoint_digest"), r.get("policy_digest") or "") != key]
     if foreign:
         diffs = list(dict.fromkeys(d for r in foreign for d in differences(r, cfg, p.checkpoint_digest,
                                                                                 p.policy_digest)))

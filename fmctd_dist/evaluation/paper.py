@@ -34,7 +34,8 @@ PAPER_CUBE: dict[str, dict[str, tuple[float, float | None, float, float | None]]
     "fast-mctd-replan": {"single": (100, 0, 3.0, 0.2), "double": (77, 11, 5.9, 1.7), "triple": (50, 16, 9.1, 1.8)},
 }
 # Visual PointMaze table (reference.md §14): success %, planning time s; no standard deviations given.
-_VISUAL = {"diffuser": (8, 0, 7.0, 6.7), "diffuser-replan": (8, 0, 26.4, 26.0), "diffusion-forcing": (66, 8, 14.5, 17.1),
+_VISUAL = {"diffuser": (8, 0, 7.0, 6.7), "diffuser-replan": (8, 0, 26.4, 26.0),
+           "diffusion-forcing": (66, 8, 14.5, 17.1),
            "mctd": (76, 2, 98.8, 320.1), "p-mctd": (86, 0, 6.8, 7.6), "s-mctd": (82, 31, 40.1, 168.7),
            "fast-mctd": (80, 32, 4.0, 5.1), "mctd-replan": (86, 31, 129.8, 419.7),
            "fast-mctd-replan": (84, 38, 14.3, 26.7)}

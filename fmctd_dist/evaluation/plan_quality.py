@@ -159,7 +159,8 @@ def precision(ckpt: Path, batch: int = 64, timesteps: tuple[int, ...] = ()) -> d
         ident = np.linalg.norm(frames(xn / a.sqrt()) - frames(x), axis=-1)
         b, i = steps(x0)
         out["rows"].append({
-            "timestep": t, "x0_rms": float(np.sqrt((err ** 2).mean())), "identity_rms": float(np.sqrt((ident ** 2).mean())),
+            "timestep": t, "x0_rms": float(np.sqrt((err ** 2).mean())),
+            "identity_rms": float(np.sqrt((ident ** 2).mean())),
             "first": float(per_frame[0]), "middle": float(per_frame[len(per_frame) // 2]), "last": float(per_frame[-1]),
             "boundary_mean": float(b.mean()), "boundary_max": float(b.max()),
             "inside_mean": float(i.mean()), "inside_max": float(i.max()),

@@ -195,7 +195,8 @@ def check_cluster(p: Prepared, n_actors: int) -> None:
     need_gpu = n_actors * r.num_gpus
     if need_gpu > res.get("GPU", 0.0):
         raise DeviceError(f"{n_actors} denoiser actor(s) x ray.num_gpus={r.num_gpus} need {need_gpu:g} GPU(s) "
-                          f"but the Ray cluster has {res.get('GPU', 0.0):g}; lower ray.denoiser_actors or add GPU nodes")
+                          f"but the Ray cluster has {res.get('GPU', 0.0):g}; "
+                          f"lower ray.denoiser_actors or add GPU nodes")
     need_cpu = n_actors * r.num_cpus
     if need_cpu > res.get("CPU", 0.0):
         raise DeviceError(f"{n_actors} denoiser actor(s) x ray.num_cpus={r.num_cpus} need {need_cpu:g} CPU(s) "

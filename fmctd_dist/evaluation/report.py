@@ -179,8 +179,9 @@ def maze_table(rows: list[dict[str, Any]], envs: list[str] = ENV_ORDER, methods:
     key = _lines(rows)
     # "in denoiser": share of planning time spent computing inside denoiser actors / inside denoiser calls
     # (the latter adds queueing behind other env actors and Ray transport; "–" for rows recorded before it existed)
-    lines = ["| method | env | episodes (tasks x seeds) | success (%) | planning time (s) | in denoiser: compute / calls | "
-             "success per task | paper: success / time (GPU) |", "|---|---|---|---|---|---|---|---|"]
+    lines = ["| method | env | episodes (tasks x seeds) | success (%) | planning time (s) | "
+             "in denoiser: compute / calls | success per task | paper: success / time (GPU) |",
+             "|---|---|---|---|---|---|---|---|"]
     for env in envs:
         for m in methods:
             if (m, env) not in key:
@@ -192,7 +193,8 @@ def maze_table(rows: list[dict[str, Any]], envs: list[str] = ENV_ORDER, methods:
                 more = f"; {partial} more of unfinished seeds not counted" if partial else ""
                 lines.append(
                     f"| {_method_cell(s, shipped)} | {env} | {s['episodes']} ({n_tasks} x {s['seeds']}{more}) | "
-                    f"{_pm(s['success'], s['success_std'])}{timed_out} | {_pm(s['plan_time_s'], s['plan_time_std'], '.2f')} | "
+                    f"{_pm(s['success'], s['success_std'])}{timed_out} | "
+                    f"{_pm(s['plan_time_s'], s['plan_time_std'], '.2f')} | "
                     f"{_shares(s)} | {'/'.join(f'{v:.0f}' for v in s['per_task'].values())} | "
                     f"{paper_cell(m, env)} |")
     return "\n".join(lines)
@@ -261,7 +263,8 @@ def ablation_table(ab: Ablation, rows: list[dict[str, Any]], shipped: set[str] |
     summary = ablation_summary(rows, ab.knob)
     refs = {s["env"]: s for s in summary if s["value"] == ab.default and type(s["value"]) is type(ab.default)}
     lines = [f"| {ab.knob} | method / env | episodes (tasks x seeds) | success (%) | planning time (s) | "
-             f"time / default | expansions | iterations | in denoiser: compute / calls | paper (P-MCTD, PointMaze-giant) |",
+             f"time / default | expansions | iterations | in denoiser: compute / calls | "
+             f"paper (P-MCTD, PointMaze-giant) |",
              "|---|---|---|---|---|---|---|---|---|---|"]
     for s in summary:
         ref = refs.get(s["env"])
@@ -272,7 +275,8 @@ def ablation_table(ab: Ablation, rows: list[dict[str, Any]], shipped: set[str] |
         older = f" (older weights {str(digest)[:8]})" if shipped is not None and digest not in shipped else ""
         lines.append(
             f"| {s['value']} | {','.join(s['method'])} / {s['env'].replace('pointmaze-', '')}{variant}{older} | "
-            f"{s['episodes']} ({len(s['per_task'])} x {s['seeds']}) | {_pm(s['success'], s['success_std'])}{timed_out} | "
+            f"{s['episodes']} ({len(s['per_task'])} x {s['seeds']}) | "
+            f"{_pm(s['success'], s['success_std'])}{timed_out} | "
             f"{_pm(s['plan_time_s'], s['plan_time_std'], '.2f')} | {ratio} | {s['expansions']:.0f} | "
             f"{s['iterations']:.1f} | {_shares(s)} | {ab.paper.get(s['value'], '–')} |")
     return "\n".join(lines)

@@ -64,7 +64,8 @@ def visual_planner(cfg: Config) -> tuple[Any, Any, dict[str, Any], Any]:
 
 
 def task_latents(episodes: Any, task: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
-    """(start, goal) latents of ``task``: the env reset, its start and goal frames encoded as an episode encodes them."""
+    """(start, goal) latents of ``task``: the env reset, its start and goal frames encoded as an episode
+    encodes them."""
     env = episodes.env
     env.reset(task, seed)
     return episodes.vae.encode(env.image()[None])[0], episodes.vae.encode(env.goal_image()[None])[0]
