@@ -279,7 +279,7 @@ def run_ray(p: Prepared, store: ResultStore, progress: bool = True,
                     f"task {key[0]} seed {key[1]}: {why}, {n} time(s); ray.max_restarts={cfg.ray.max_restarts} "
                     "re-runs are allowed per episode; check the nodes (`ray status`, `ray logs`), or raise "
                     "ray.episode_timeout_s if the episodes are just slow, and rerun to resume (finished "
-                    "episodes are kept)")
+                    "episodes are kept)") from None
             say(f"task {key[0]} seed {key[1]}: {why}; re-running it ({n}/{cfg.ray.max_restarts})")
             kill_quietly(pair)
             pair = episode_pair(p, pool.actors)
