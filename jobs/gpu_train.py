@@ -73,11 +73,17 @@ def _ant(maze: str, jump: int) -> tuple[str, list[str]]:
                                        f"train.init_from=checkpoints/campaign-pointmaze-{maze}-h{jump}", BW]
 
 
+# the best sparse latent model of each maze: medium's boundary-loss lineage (7,057 CPU s of boundary loss,
+# median boundary step 4.90 -> 1.30; docs/results.md section 13.4), large's shipped model
+VISUAL_START = {"medium": "checkpoints/visual-pointmaze-medium-h5-s27",
+                "large": "checkpoints/visual-pointmaze-large-h5"}
+
+
 def _visual(maze: str, jump: int) -> tuple[str, list[str]]:
-    """A visual-maze latent model continued (h5) or started (h1) from the shipped sparse one, on the carried
+    """A visual-maze latent model continued (h5) or started (h1) from the maze's best sparse one, on the carried
     100-episode latent store (data/visual-pointmaze-<maze>-latents-...-n100-...; section 13.4), boundary loss on."""
     return f"visual-pointmaze-{maze}-h{jump}", [f"env=visual-pointmaze-{maze}", f"jump={jump}", "visual.episodes=100",
-                                                f"train.init_from=checkpoints/visual-pointmaze-{maze}-h5", BW]
+                                                f"train.init_from={VISUAL_START[maze]}", BW]
 
 
 SETS: dict[str, list[tuple[str, list[str]]]] = {
@@ -89,7 +95,7 @@ SETS: dict[str, list[tuple[str, list[str]]]] = {
     # data.workers processes per maze; carry checkpoints/ant-expert with the six campaign models
     "ant": [_ant(m, j) for j in (5, 1) for m in ("medium", "large", "giant")],
     # the four visual latent models; nothing is rendered there: carry each maze's VAE
-    # (checkpoints/visual-pointmaze-<maze>-vae), its latent store and its shipped -h5 model
+    # (checkpoints/visual-pointmaze-<maze>-vae), its latent store and its VISUAL_START model
     "visual": [_visual(m, j) for j in (5, 1) for m in ("medium", "large")],
 }
 CARRIED_DATA = ("visual-",)  # env families whose data is carried (made on a CPU machine), never generated here

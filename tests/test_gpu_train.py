@@ -15,7 +15,7 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO / "jobs"))
 
 from cli_words import merge  # noqa: E402  (job scripts, not package modules)
-from gpu_train import SETS  # noqa: E402
+from gpu_train import SETS, VISUAL_START  # noqa: E402
 
 
 def test_gpu_train_dry_run_packs_one_tar_per_model(tmp_path):
@@ -100,10 +100,12 @@ def test_visual_set_dry_run_trains_on_a_carried_store_without_making_data(tmp_pa
                                                       / "data-visual-pointmaze-medium.log").exists()
 
 
-def test_visual_set_continues_the_shipped_visual_models():
+def test_visual_set_continues_each_mazes_best_committed_visual_model():
     assert [n for n, _ in SETS["visual"]] == ["visual-pointmaze-medium-h5", "visual-pointmaze-large-h5",
                                               "visual-pointmaze-medium-h1", "visual-pointmaze-large-h1"]
     for name, words in SETS["visual"]:
-        maze = name.rsplit("-h", 1)[0]
-        assert f"train.init_from=checkpoints/{maze}-h5" in words and "visual.episodes=100" in words
-        assert (REPO / "checkpoints" / f"{maze}-h5" / "manifest.json").exists()
+        maze = name.rsplit("-h", 1)[0].removeprefix("visual-pointmaze-")
+        start = VISUAL_START[maze]
+        assert f"train.init_from={start}" in words and "visual.episodes=100" in words
+        manifest = json.loads((REPO / start / "manifest.json").read_text())
+        assert manifest["config"]["env"]["name"] == f"visual-pointmaze-{maze}" and manifest["config"]["jump"] == 5
