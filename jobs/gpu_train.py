@@ -73,10 +73,10 @@ def _ant(maze: str, jump: int) -> tuple[str, list[str]]:
                                        f"train.init_from=checkpoints/campaign-pointmaze-{maze}-h{jump}", BW]
 
 
-# the best sparse latent model of each maze: medium's boundary-loss lineage (7,057 CPU s of boundary loss,
-# median boundary step 4.90 -> 1.30; docs/results.md section 13.4), large's shipped model
+# the best sparse latent model of each maze, from its boundary-loss lineage (docs/results.md section 13.4):
+# median boundary step from validation starts 4.90 -> 1.30 (medium), 6.31 -> 2.48 (large)
 VISUAL_START = {"medium": "checkpoints/visual-pointmaze-medium-h5-s27",
-                "large": "checkpoints/visual-pointmaze-large-h5"}
+                "large": "checkpoints/visual-pointmaze-large-h5-s28"}
 
 
 def _visual(maze: str, jump: int) -> tuple[str, list[str]]:

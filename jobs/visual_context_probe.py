@@ -2,6 +2,7 @@
 
     python jobs/visual_context_probe.py                                   # the shipped medium H=5 model
     python jobs/visual_context_probe.py visual.episodes=100 checkpoint=runs/visual/visual-pointmaze-medium-h5-e100
+    python jobs/visual_context_probe.py env=visual-pointmaze-large visual.episodes=100   # the shipped large model
 
 Every searched plan of docs/results.md 13.4 starts 3-8 estimated units from its start frame, where
 the point moves at most 1.0 in 5 env steps. Either the model ignores its context token, or the start
@@ -33,8 +34,8 @@ WINDOWS = 20  # validation starts
 def main(argv: list[str]) -> int:
     from fmctd_dist.data.visual_dataset import load_visual_dataset
 
-    cfg = load_config(["env=visual-pointmaze-medium", "method=diffusion-forcing", "jump=5",
-                       "method.guidance_scale=0.0"] + argv, env="visual-pointmaze-medium")
+    cfg = load_config(["method=diffusion-forcing", "jump=5", "method.guidance_scale=0.0"] + argv,
+                      env="visual-pointmaze-medium")
     set_threads(cfg.eval.threads or 1)
     planner, episodes, manifest, norm = visual_planner(cfg)
     pos, jump = episodes.positions, cfg.jump
