@@ -248,6 +248,23 @@ def test_context_probe_prints_a_row_per_start_kind(monkeypatch, capsys):
     assert boundary > 0 and inside > 0
 
 
+@pytest.mark.parametrize("words, maze", [([], "visual-pointmaze-medium"),
+                                         (["env=visual-pointmaze-large"], "visual-pointmaze-large")])
+def test_context_probe_plans_on_the_maze_env_names(monkeypatch, words, maze):
+    """The probe's maze is env= (default medium): it once put env=visual-pointmaze-medium in front of the
+    words itself, so env=visual-pointmaze-large stopped with "env is given twice"."""
+    from conftest import load_job
+
+    probe = load_job("visual_context_probe")
+
+    def stop(cfg):
+        raise LookupError(cfg.env.name)  # the planner is not needed: the config is what is checked
+
+    monkeypatch.setattr(probe, "visual_planner", stop)
+    with pytest.raises(LookupError, match=f"^{maze}$"):
+        probe.main(words)
+
+
 @needs_shipped
 @needs_latents
 def test_plan_quality_reports_warps_and_manifold_distance():
