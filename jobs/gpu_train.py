@@ -74,9 +74,9 @@ def _ant(maze: str, jump: int) -> tuple[str, list[str]]:
 
 
 # the best sparse latent model of each maze, from its boundary-loss lineage (docs/results.md section 13.4):
-# median boundary step from validation starts 4.90 -> 1.30 (medium), 6.31 -> 2.48 (large)
+# median boundary step from validation starts 4.90 -> 1.30 (medium), 6.31 -> 1.73 (large)
 VISUAL_START = {"medium": "checkpoints/visual-pointmaze-medium-h5-s27",
-                "large": "checkpoints/visual-pointmaze-large-h5-s28"}
+                "large": "checkpoints/visual-pointmaze-large-h5-s29"}
 
 
 def _visual(maze: str, jump: int) -> tuple[str, list[str]]:

@@ -3,6 +3,7 @@
     python jobs/visual_context_probe.py                                   # the shipped medium H=5 model
     python jobs/visual_context_probe.py visual.episodes=100 checkpoint=runs/visual/visual-pointmaze-medium-h5-e100
     python jobs/visual_context_probe.py env=visual-pointmaze-large visual.episodes=100   # the shipped large model
+    python jobs/visual_context_probe.py visual.episodes=100 jump=1 checkpoint=<a dense (H=1) latent model>
 
 Every searched plan of docs/results.md 13.4 starts 3-8 estimated units from its start frame, where
 the point moves at most 1.0 in 5 env steps. Either the model ignores its context token, or the start
@@ -34,8 +35,9 @@ WINDOWS = 20  # validation starts
 def main(argv: list[str]) -> int:
     from fmctd_dist.data.visual_dataset import load_visual_dataset
 
-    cfg = load_config(["method=diffusion-forcing", "jump=5", "method.guidance_scale=0.0"] + argv,
-                      env="visual-pointmaze-medium")
+    given = {w.split("=", 1)[0] for w in argv}
+    defaults = [w for w in ("jump=5", "method.guidance_scale=0.0") if w.split("=", 1)[0] not in given]
+    cfg = load_config(defaults + argv, env="visual-pointmaze-medium", method="diffusion-forcing")
     set_threads(cfg.eval.threads or 1)
     planner, episodes, manifest, norm = visual_planner(cfg)
     pos, jump = episodes.positions, cfg.jump
