@@ -42,6 +42,7 @@ MODEL_NORMS = ("post", "pre")
 GUIDANCE_PATHS = ("input", "network")
 LR_SCHEDULES = ("constant", "cosine", "wsd")
 PRECISIONS = ("fp32", "bf16")
+BOUNDARY_SPACES = ("token", "position")  # train.boundary_space: where the boundary step loss is measured
 BUDGET_CLOCKS = ("wall", "cpu")
 
 # Top-level shorthands accepted on the command line (`tasks=[1] seeds=[0] runner=local`).
@@ -256,6 +257,12 @@ class TrainConfig:
     # conditional mean still minimises it, so it re-weights toward tokens' relative offsets without
     # changing the optimum. 0 = off (the paper's).
     boundary_weight: float = spec(0.0, ge=0, why="weight of the token-boundary step loss (0 = off, the paper's)")
+    # Where that step is measured. token: in the model's normalised frame units. position: through the
+    # dataset's position readout (data module's ``position_readout``; maze states: x, y; visual latents: the
+    # frozen position estimator), in standardised world units. A visual latent moves mostly in directions the
+    # estimator ignores (frame-to-frame jitter), so a latent step that looks ordinary can be a 7-unit jump
+    # in position (results 13.4, session 30): the position space weights the directions that matter.
+    boundary_space: str = spec("token", choices=BOUNDARY_SPACES)
     # Recipe lever against the plans' first-step jump (results §4, session 21): the sampler always feeds
     # the context token clean (timestep diffusion.stabilization - 1, scaled, no noise), but the paper's
     # training noises it at a random timestep (half the time in [0, 250), else anywhere), so that exact

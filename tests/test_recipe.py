@@ -32,11 +32,11 @@ LEVERS = {"model.param=v": ("model", "param"), "model.param=v_offset": ("model",
           "train.clean_context=0.5": ("train", "clean_context")}
 MODEL_LEVERS = ("model.param=v", "model.param=v_offset", "model.norm=pre")
 RECIPE_FIELDS = {"model": ("param", "norm"), "train": ("lr_schedule", "precision", "time_budget_s", "boundary_weight",
-                                                      "clean_context"),
+                                                      "boundary_space", "clean_context"),
                  "diffusion": ("guidance_path",)}
 PAPER = {"model": {"param": "x0", "norm": "post"}, "train": {"lr_schedule": "constant", "precision": "fp32",
                                                               "time_budget_s": 0.0, "boundary_weight": 0.0,
-                                                              "clean_context": 0.0},
+                                                              "boundary_space": "token", "clean_context": 0.0},
          "diffusion": {"guidance_path": "input"}}
 
 
@@ -253,6 +253,52 @@ def test_boundary_loss_sees_per_token_offsets_and_not_shared_ones():
     assert float(boundary_loss(offsets, x0, weight, 4)) == pytest.approx(2 * 0.25 / 4)
     weight[:, 2] = 0.0  # a boundary counts with its noisier (lower-weighted) token's weight
     assert float(boundary_loss(offsets, x0, weight, 4)) == 0.0
+
+
+def test_boundary_loss_in_position_space_sees_only_what_the_readout_reads():
+    """train.boundary_space=position: a step the readout ignores costs nothing, one it reads costs in full."""
+    gen = torch.Generator().manual_seed(0)
+    x0 = torch.randn(3, 5, 3 * 4, generator=gen)  # 5 tokens of 4 three-dimensional frames
+    weight = torch.ones(3, 5)
+    readout = lambda f: 2.0 * f[..., :2]  # noqa: E731  positions: the first two dims, scaled
+    unread, read = x0.clone(), x0.clone()
+    unread[:, 2, 2::3] += 0.5  # token 2 shifted along the third dim only
+    read[:, 2, 0::3] += 0.5  # token 2 shifted along the first dim
+    assert float(boundary_loss(unread, x0, weight, 4, readout)) == 0.0
+    assert float(boundary_loss(unread, x0, weight, 4)) > 0.0  # the token space sees both
+    # two boundaries of the four, one of two position dims, each (2 * 0.5)**2 off
+    assert float(boundary_loss(read, x0, weight, 4, readout)) == pytest.approx(2 * 1.0 / (4 * 2))
+
+
+def test_position_space_on_maze_frames_is_the_token_space():
+    """A maze frame is its normalised (x, y), so its readout changes nothing."""
+    from fmctd_dist.data.dataset import NavigateDataset
+
+    readout, prov = NavigateDataset(None, {}, None, None).position_readout(tiny_cfg(1))
+    x0 = torch.as_tensor(FakeData().windows[:4])
+    pred = x0 + 0.1 * torch.randn(x0.shape, generator=torch.Generator().manual_seed(2))
+    weight = torch.rand(4, x0.shape[1], generator=torch.Generator().manual_seed(3))
+    assert float(boundary_loss(pred, x0, weight, 10, readout)) == float(boundary_loss(pred, x0, weight, 10))
+    assert prov["readout"]
+
+
+class _DataWithReadout(FakeData):
+    def position_readout(self, cfg: Config):
+        return torch.nn.Linear(2, 2), {"readout": "a test map"}
+
+
+def test_position_space_is_recorded_and_bad_combinations_are_one_error_before_training(tmp_path):
+    words = ("train.boundary_weight=3", "train.boundary_space=position", "train.ckpt_every=4")
+    train(tiny_cfg(4, *words), _DataWithReadout(), tmp_path / "ok", progress=False)
+    m = json.loads((tmp_path / "ok" / MANIFEST_FILE).read_text())
+    assert m["config"]["train"]["boundary_space"] == "position" and m["boundary_readout"] == {"readout": "a test map"}
+    with pytest.raises(ConfigError, match="no position readout.*train.boundary_space=token"):
+        train(tiny_cfg(4, *words), FakeData(), tmp_path / "none", progress=False)
+    with pytest.raises(ConfigError, match="train.boundary_weight=0.0"):
+        train(tiny_cfg(4, "train.boundary_space=position"), _DataWithReadout(), tmp_path / "off", progress=False)
+    with pytest.raises(ConfigError, match="train.boundary_space"):
+        tiny_cfg(4, "train.boundary_space=latent")
+    assert not (tmp_path / "none").exists() and not (tmp_path / "off").exists()
 
 
 def test_validation_loss_leaves_the_boundary_term_out_so_arms_compare():

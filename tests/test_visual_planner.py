@@ -57,6 +57,23 @@ def test_latent_windows_have_the_planner_shape(jump, tokens):
     assert prov["vae_digest"] == "cf40771aa26c8504" and prov["store_sha256"] == "ab" * 32 and prov["latent_dim"] == 8
 
 
+@pytest.mark.skipif(not (REPO_ROOT / "checkpoints" / f"{MEDIUM}-estimator" / "model.pt").exists(),
+                    reason="the medium estimator is not shipped")
+def test_position_readout_reads_latent_frames_as_the_estimator_does():
+    """train.boundary_space=position on latents: normalised frames -> the estimator's standardised (x, y)."""
+    from fmctd_dist.visual.guide import Positions, load_estimator_net
+
+    cfg = load_config([f"env={MEDIUM}", "jump=1"], method="mctd")
+    ds = _fake_dataset()
+    readout, prov = ds.position_readout(cfg)
+    assert prov["estimator_digest"] and prov["estimator"].endswith(f"{MEDIUM}-estimator")
+    z = ds.train[0, :7]
+    with torch.no_grad():
+        got = readout(torch.as_tensor(ds.normaliser.normalise(z))).numpy()
+    net, _ = load_estimator_net(cfg, "cf40771aa26c8504", 8)
+    np.testing.assert_allclose(got * ds.xy_std + ds.xy_mean, Positions(net)(z), rtol=1e-4, atol=1e-4)
+
+
 def test_visual_env_trains_and_evaluates_now():
     """The visual family is no longer refused by train / eval; a maze-only part still names the visual code."""
     from fmctd_dist.envs.maze import maze_geometry

@@ -219,6 +219,16 @@ class NavigateDataset:
     def normaliser(self) -> Normaliser:
         return Normaliser.from_lists(self.manifest["obs_mean"], self.manifest["obs_std"])
 
+    def position_readout(self, cfg: Config) -> tuple[Any, dict[str, Any]]:
+        """A frame is its normalised (x, y): the readout is the frame itself (train.boundary_space=position
+        then equals token)."""
+        return _frame_xy, {"readout": "the frames' normalised x, y"}
+
+
+def _frame_xy(frames):
+    """Normalised frames [..., 2] -> the same positions (torch or numpy)."""
+    return frames[..., :2]
+
 
 def load_dataset(cfg: Config, path: Path | None = None) -> NavigateDataset:
     require_family(cfg.env.name, MAZE_FAMILIES, "the navigate-data code (data/dataset.py, used by jobs/train.py)")

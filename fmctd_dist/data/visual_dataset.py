@@ -28,9 +28,9 @@ from fmctd_dist.data.tokens import Normaliser
 from fmctd_dist.errors import DatasetError
 from fmctd_dist.families import require_family
 from fmctd_dist.hints import shown
+from fmctd_dist.visual.config import LATENT_KEY, part_dir
 
 VISUAL_FAMILY = "visual-pointmaze"
-LATENT_KEY = "latents"  # the manifest field (model manifests) that holds the provenance
 
 
 @dataclass
@@ -62,6 +62,17 @@ class VisualLatentDataset:
                              "latent_dim": int(m["latent_dim"]), "episodes": list(m["episodes"]),
                              "val_episodes": list(m["val_episodes"]), "frames_digest": m["frames_digest"],
                              "xy_mean": self.xy_mean.tolist(), "xy_std": self.xy_std.tolist()}}
+
+    def position_readout(self, cfg: Config) -> tuple[Any, dict[str, Any]]:
+        """Normalised latent frames -> standardised (x, y) through the frozen position estimator of this
+        store's VAE: the map guidance reads (``visual/guide.py``), for train.boundary_space=position."""
+        from fmctd_dist.visual.guide import EstimatorGuide, load_estimator_net
+
+        net, m = load_estimator_net(cfg, str(self.manifest["vae"]["digest"]), int(self.manifest["latent_dim"]))
+        norm = self.normaliser
+        guide = EstimatorGuide(net, norm.mean, norm.std, self.xy_mean, self.xy_std)
+        return guide, {"readout": "position estimator", "estimator": shown(part_dir(cfg, "", "estimator")),
+                       "estimator_digest": m.get("digest")}
 
 
 def _parts(cfg: Config):

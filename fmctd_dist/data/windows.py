@@ -70,11 +70,12 @@ class TrainData:
     """What the training loop needs: train sampler, fixed validation batches, digest, normaliser."""
 
     def __init__(self, train: WindowSampler, val: WindowSampler, digest: str, seed: int,
-                 provenance: dict | None = None):
+                 provenance: dict | None = None, position_readout=None):
         self.train, self.val = train, val
         self.normaliser = train.normaliser
         self.digest, self.seed = digest, seed
         self.provenance = provenance or {}  # extra manifest fields the dataset asks a model to keep (visual: its VAE)
+        self.position_readout = position_readout  # cfg -> (frames -> positions, provenance); None: frames have none
 
     @property
     def n_tokens(self) -> int:
@@ -95,4 +96,4 @@ def train_data(cfg, dataset) -> TrainData:
               normaliser=dataset.normaliser)
     train = WindowSampler(dataset.train, **kw, start_balance=cfg.train.start_balance)
     return TrainData(train, WindowSampler(dataset.val, **kw), dataset.digest, cfg.data.seed,  # val stays uniform
-                     getattr(dataset, "provenance", None))
+                     getattr(dataset, "provenance", None), getattr(dataset, "position_readout", None))

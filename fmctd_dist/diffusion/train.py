@@ -8,7 +8,8 @@ an uninterrupted one produce the same weights (bitwise on CPU). ``train.time_bud
 a run once its recorded wall time (or, ``train.budget_clock=cpu``, its CPU time) reaches the budget
 (recipe arms at equal compute); the recipe levers ``train.lr_schedule``, ``train.precision``
 (bf16 autocast of the training step), ``train.boundary_weight`` (a loss on the steps across
-token boundaries) and ``train.clean_context`` (the context token fed as the sampler feeds it) default
+token boundaries, measured in ``train.boundary_space``: the frames, or positions read from them) and
+``train.clean_context`` (the context token fed as the sampler feeds it) default
 to the paper's constant LR, fp32, plain token loss and noised context.
 """
 
@@ -18,7 +19,7 @@ import copy
 import math
 import time
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any, Callable, Protocol
 
 import numpy as np
 import torch
@@ -34,7 +35,7 @@ from fmctd_dist.diffusion.checkpoint import (
 from fmctd_dist.diffusion.model import DFTransformer
 from fmctd_dist.diffusion.models import build_model
 from fmctd_dist.diffusion.schedule import alphas_cumprod, make_betas
-from fmctd_dist.errors import CheckpointError, DatasetError
+from fmctd_dist.errors import CheckpointError, ConfigError, DatasetError
 
 CONTEXT_T_MAX = 250  # with prob. 0.5 the context token's timestep is resampled in [0, 250)
 MASKED_WEIGHT = 0.05  # loss weight of tokens past the random terminal (they are pure noise)
@@ -44,7 +45,11 @@ LOG_EVERY = 10  # steps between progress-bar updates (each one syncs the device)
 PAPER_TRAINING = {"df": {"layers": 12, "batch_size": 1024, "steps": 200_005},
                   "diffuser": {"batch_size": 32, "steps": 20_000, "unet_channels": [32, 128, 256]}}
 PAPER_RECIPE = {"model.param": "x0", "model.norm": "post", "train.lr_schedule": "constant", "train.precision": "fp32",
-                "train.boundary_weight": 0.0, "train.clean_context": 0.0}
+                "train.boundary_weight": 0.0, "train.boundary_space": "token",
+                "train.clean_context": 0.0}
+
+
+Readout = Callable[[torch.Tensor], torch.Tensor]  # normalised frames [..., d] -> standardised positions [..., 2]
 
 
 class TrainDataLike(Protocol):
@@ -62,7 +67,7 @@ class TrainDataLike(Protocol):
 class DFLoss(torch.nn.Module):
     """Diffusion Forcing loss: per-token timesteps, length randomisation, min-SNR-weighted x0 MSE."""
 
-    def __init__(self, cfg: Config, device: torch.device):
+    def __init__(self, cfg: Config, device: torch.device, readout: Readout | None = None):
         super().__init__()
         dc = cfg.diffusion
         ab = alphas_cumprod(make_betas(dc.beta_schedule, dc.timesteps, dc.beta_start, dc.beta_end))
@@ -75,6 +80,7 @@ class DFLoss(torch.nn.Module):
         self.clip_noise = cfg.diffusion.clip_noise
         self.frame_stack = cfg.model.frame_stack
         self.boundary_weight = cfg.train.boundary_weight
+        self.readout = readout  # train.boundary_space=position: frames -> positions (frozen)
         self.clean_context = cfg.train.clean_context
         self.context_t = dc.stabilization - 1  # the sampler's level-0 timestep (reference.md §5)
 
@@ -104,21 +110,26 @@ class DFLoss(torch.nn.Module):
         pred = model(xt, k)
         loss = (weight[..., None] * (pred - x0).square()).mean()
         if not validation and self.boundary_weight:
-            loss = loss + self.boundary_weight * boundary_loss(pred, x0, weight, self.frame_stack)
+            loss = loss + self.boundary_weight * boundary_loss(pred, x0, weight, self.frame_stack, self.readout)
         return loss
 
 
-def boundary_loss(pred: torch.Tensor, x0: torch.Tensor, weight: torch.Tensor, frame_stack: int) -> torch.Tensor:
+def boundary_loss(pred: torch.Tensor, x0: torch.Tensor, weight: torch.Tensor, frame_stack: int,
+                  readout: Readout | None = None) -> torch.Tensor:
     """Weighted MSE of the step across each token boundary, predicted vs true.
 
     pred, x0: [B, T, D] tokens of ``frame_stack`` frames; weight: [B, T] per-token loss weights.
     A per-token offset error, which the token MSE barely distinguishes from a shared one, shows
-    here in full; each boundary is weighted by its noisier (lower-weighted) token.
+    here in full; each boundary is weighted by its noisier (lower-weighted) token. ``readout``
+    (train.boundary_space=position) maps frames [..., d] to positions [..., 2] before the step is taken.
     """
     d = x0.shape[-1] // frame_stack
 
     def step(x: torch.Tensor) -> torch.Tensor:
-        return x[:, 1:, :d] - x[:, :-1, -d:]  # first frame of token k+1 minus last frame of token k
+        first, last = x[:, 1:, :d], x[:, :-1, -d:]  # first frame of token k+1, last frame of token k
+        if readout is not None:
+            first, last = readout(first), readout(last)
+        return first - last
 
     w = torch.minimum(weight[:, 1:], weight[:, :-1])  # [B, T-1]
     return (w[..., None] * (step(pred) - step(x0)).square()).mean()
@@ -161,9 +172,33 @@ class DiffuserLoss(torch.nn.Module):
         return (self.frame_weights(t - 1, dev)[None, :, None] * err).mean()
 
 
-def make_loss(cfg: Config, device: torch.device) -> torch.nn.Module:
+def make_loss(cfg: Config, device: torch.device, readout: Readout | None = None) -> torch.nn.Module:
     """The training loss of ``cfg.model.kind`` (df: DFLoss, diffuser: DiffuserLoss)."""
-    return DiffuserLoss(cfg, device) if cfg.model.kind == "diffuser" else DFLoss(cfg, device)
+    return DiffuserLoss(cfg, device) if cfg.model.kind == "diffuser" else DFLoss(cfg, device, readout)
+
+
+def boundary_readout(cfg: Config, data: Any, device: torch.device) -> tuple[Readout | None, dict[str, Any]]:
+    """train.boundary_space=position: the data's position readout (frozen) and what the manifest records.
+
+    A data module offers ``position_readout(cfg) -> (readout, provenance)`` when its frames have a
+    position to read; asking for the position space on data without one, or with the loss off, is one
+    ConfigError before any training.
+    """
+    tc = cfg.train
+    if tc.boundary_space == "token":
+        return None, {}
+    if cfg.model.kind != "df" or not tc.boundary_weight:
+        raise ConfigError(f"train.boundary_space={tc.boundary_space} measures the token-boundary loss, which is off "
+                          f"(train.boundary_weight={tc.boundary_weight}, model.kind={cfg.model.kind}); set "
+                          "train.boundary_weight>0 on a model.kind=df model, or drop train.boundary_space")
+    make = getattr(data, "position_readout", None)
+    if make is None:
+        raise ConfigError(f"train.boundary_space=position: the {cfg.env.name} data has no position readout; use "
+                          "train.boundary_space=token")
+    readout, provenance = make(cfg)
+    if isinstance(readout, torch.nn.Module):
+        readout = readout.to(device).requires_grad_(False)
+    return readout, {"boundary_readout": provenance}
 
 
 def vs_paper(cfg: Config, step: int) -> str:
@@ -246,7 +281,8 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
         torch.manual_seed(tc.seed)
         model = build_model(cfg.model, cfg.n_tokens, cfg.token_dim, diffusion_cfg=cfg.diffusion).to(device)
     opt = torch.optim.AdamW(model.parameters(), lr=tc.lr, betas=(0.9, 0.999), weight_decay=tc.weight_decay)
-    loss_fn = make_loss(cfg, device)
+    readout, readout_provenance = boundary_readout(cfg, data, device)
+    loss_fn = make_loss(cfg, device, readout)
     rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence([tc.seed, data.seed])))
     gen = torch.Generator(device=device).manual_seed(tc.seed)
     step, wall, cpu, history, resumed_from = 0, 0.0, 0.0, {"val": [], "train": []}, None
@@ -296,6 +332,7 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
     base = {"dataset_digest": data.digest, "data_seed": data.seed, "git_sha": git_sha(),
             "normaliser": {"mean": data.normaliser.mean.tolist(), "std": data.normaliser.std.tolist()}}
     base.update(getattr(data, "provenance", {}))  # e.g. the visual maze's VAE and latent store
+    base.update(readout_provenance)  # train.boundary_space=position: which readout measured the loss
     if init_from is not None:
         base["init_from"] = init_from
 

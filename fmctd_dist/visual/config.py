@@ -24,6 +24,7 @@ from fmctd_dist.families import require_family
 
 VISUAL_FAMILY = "visual-pointmaze"
 
+LATENT_KEY = "latents"  # the planner manifest's field holding the latent provenance (data/visual_dataset.py)
 PREFIXES = ("vae.", "latents.", "estimator.", "invdyn.", "reach.")
 PARTS = ("vae", "episodes", "latents", "estimator", "invdyn", "reach")
 OUT = "where it is written and read; '' -> checkpoints/<env>-<part>"

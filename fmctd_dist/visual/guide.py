@@ -27,10 +27,9 @@ import torch
 from torch import nn
 
 from fmctd_dist.config import Config
-from fmctd_dist.data.visual_dataset import LATENT_KEY
 from fmctd_dist.errors import CheckpointError
 from fmctd_dist.visual.checkpoint import load_state, read_part_manifest
-from fmctd_dist.visual.config import part_dir
+from fmctd_dist.visual.config import LATENT_KEY, part_dir
 from fmctd_dist.visual.mlp import LatentMLP
 
 
