@@ -2,7 +2,7 @@
 
     python3 jobs/gpu_train.py OUT_DIR                           # the H200 device: --set campaign, ~8.5 min
     python3 jobs/gpu_train.py OUT_DIR --set scratch             # the three sparse models from scratch (paper recipe)
-    python3 jobs/gpu_train.py OUT_DIR --set ant                 # the six AntMaze models from the campaign ones
+    python3 jobs/gpu_train.py OUT_DIR --set ant                 # the six AntMaze models from the dense ant ones
     python3 jobs/gpu_train.py OUT_DIR --set visual              # the four visual latent models (carried stores)
     python3 jobs/gpu_train.py OUT_DIR --train-until-s 300 train.precision=bf16   # extra words go to every run
     python3 jobs/gpu_train.py OUT_DIR --dry-run                 # CPU: tiny data and model, seconds (tested)
@@ -25,8 +25,9 @@ is importable:
    of it. Sets: ``campaign`` continues the six shipped campaign PointMaze models
    (checkpoints/campaign-pointmaze-{medium,large,giant}-h{5,1}, carried) with each one's own
    recipe levers (the boundary loss, the clean context); ``scratch`` trains the three sparse ones
-   from scratch with the paper's recipe; ``ant`` fine-tunes the six AntMaze models from the same
-   carried campaign models (carry checkpoints/ant-expert too: its actions make the ant data);
+   from scratch with the paper's recipe; ``ant`` trains the six AntMaze models from the carried dense
+   ones (checkpoints/antmaze-{medium,large,giant}-h1; carry checkpoints/ant-expert too: its actions make
+   the ant data);
    ``visual`` trains the visual maze's latent models on carried latent stores (no rendering there).
 4. output: one OUT_DIR/<name>.tar per model (its model.pt + manifest.json, and the half-way
    snapshot's; < 16 MiB for the 6 x 128 model) and OUT_DIR/train_logs.txt with each run's last
@@ -67,10 +68,13 @@ def _campaign(maze: str, jump: int, *levers: str) -> tuple[str, list[str]]:
 
 
 def _ant(maze: str, jump: int) -> tuple[str, list[str]]:
-    """An AntMaze model fine-tuned from the carried campaign PointMaze model of its maze and jump
-    (section 11.6's recipe: the planner models the ant's x, y, as the point's), boundary loss on."""
+    """An AntMaze model started from the carried dense ant model of its maze (checkpoints/antmaze-<maze>-h1),
+    boundary loss on: the dense one continues it with its own levers (the clean context too), the sparse one
+    takes its weights, as the best sparse ant models of docs/results.md 11.11 did (guided warp-free 80% / 72%
+    on medium / large, against 48% / 65% from the PointMaze models); same architecture, only the jump differs."""
+    levers = [BW, CC] if jump == 1 else [BW]
     return f"antmaze-{maze}-h{jump}", [f"env=antmaze-{maze}", f"jump={jump}",
-                                       f"train.init_from=checkpoints/campaign-pointmaze-{maze}-h{jump}", BW]
+                                       f"train.init_from=checkpoints/antmaze-{maze}-h1", *levers]
 
 
 # the best sparse latent model of each maze, from its boundary-loss lineage (docs/results.md section 13.4):
@@ -92,7 +96,7 @@ SETS: dict[str, list[tuple[str, list[str]]]] = {
                  _campaign("medium", 1, BW), _campaign("large", 1, BW, CC), _campaign("giant", 1, BW, CC)],
     "scratch": [(f"{e}-h5", [f"env={e}", "jump=5"]) for e in ENVS],
     # the six AntMaze models; their datasets (~15 min per maze on one core) are made there by
-    # data.workers processes per maze; carry checkpoints/ant-expert with the six campaign models
+    # data.workers processes per maze; carry checkpoints/ant-expert with the three dense ant models
     "ant": [_ant(m, j) for j in (5, 1) for m in ("medium", "large", "giant")],
     # the four visual latent models; nothing is rendered there: carry each maze's VAE
     # (checkpoints/visual-pointmaze-<maze>-vae), its latent store and its VISUAL_START model

@@ -70,12 +70,19 @@ def test_ant_set_dry_run_makes_its_data_with_workers_and_fine_tunes(tmp_path):
     assert data["generation"]["workers"] == 2
 
 
-def test_ant_set_starts_from_the_campaign_pointmaze_weights_and_needs_the_expert():
+def test_ant_set_starts_from_the_dense_ant_weights_and_needs_the_expert():
+    """Sparse and dense ant models start from the committed dense ant model of their maze (results 11.11), whose
+    architecture (frame stack, width, depth) is the one every jump of the set trains."""
+    from fmctd_dist.config import load_config
+
     assert len(SETS["ant"]) == 6
     for name, words in SETS["ant"]:
-        point = name.replace("antmaze", "pointmaze")
-        assert f"train.init_from=checkpoints/campaign-{point}" in words and f"env={name.rsplit('-h', 1)[0]}" in words
-        assert (REPO / "checkpoints" / f"campaign-{point}" / "manifest.json").exists()
+        env = name.rsplit("-h", 1)[0]
+        start = REPO / "checkpoints" / f"{env}-h1"
+        assert f"train.init_from=checkpoints/{env}-h1" in words and f"env={env}" in words
+        model = json.loads((start / "manifest.json").read_text())["config"]["model"]
+        cfg = load_config([w for w in words if not w.startswith("train.init_from")], method="mctd")
+        assert all(model[k] == getattr(cfg.model, k) for k in ("frame_stack", "width", "layers", "heads", "ff"))
     assert (REPO / "checkpoints" / "ant-expert").is_dir()
 
 
