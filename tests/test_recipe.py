@@ -17,7 +17,7 @@ from fmctd_dist.diffusion.checkpoint import MANIFEST_FILE, load_checkpoint, writ
 from fmctd_dist.diffusion.model import DFTransformer
 from fmctd_dist.diffusion.sampler import GUIDANCE_GAIN, goal_reward, make_consts, transition
 from fmctd_dist.diffusion.schedule import PyramidSchedule
-from fmctd_dist.diffusion.train import DFLoss, boundary_loss, lr_at, train, validation_loss
+from fmctd_dist.diffusion.train import DFLoss, boundary_loss, lr_at, position_loss, train, validation_loss
 from fmctd_dist.errors import CheckpointError, ConfigError
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
@@ -32,11 +32,12 @@ LEVERS = {"model.param=v": ("model", "param"), "model.param=v_offset": ("model",
           "train.clean_context=0.5": ("train", "clean_context")}
 MODEL_LEVERS = ("model.param=v", "model.param=v_offset", "model.norm=pre")
 RECIPE_FIELDS = {"model": ("param", "norm"), "train": ("lr_schedule", "precision", "time_budget_s", "boundary_weight",
-                                                      "boundary_space", "clean_context"),
+                                                      "boundary_space", "position_weight", "clean_context"),
                  "diffusion": ("guidance_path",)}
 PAPER = {"model": {"param": "x0", "norm": "post"}, "train": {"lr_schedule": "constant", "precision": "fp32",
                                                               "time_budget_s": 0.0, "boundary_weight": 0.0,
-                                                              "boundary_space": "token", "clean_context": 0.0},
+                                                              "boundary_space": "token", "position_weight": 0.0,
+                                                              "clean_context": 0.0},
          "diffusion": {"guidance_path": "input"}}
 
 
@@ -271,7 +272,8 @@ def test_boundary_loss_in_position_space_sees_only_what_the_readout_reads():
 
 
 def test_position_space_on_maze_frames_is_the_token_space():
-    """A maze frame is its normalised (x, y), so its readout changes nothing."""
+    """A maze frame is its normalised (x, y), so its readout changes nothing: the boundary loss is the same and
+    the position loss is the token loss."""
     from fmctd_dist.data.dataset import NavigateDataset
 
     readout, prov = NavigateDataset(None, {}, None, None).position_readout(tiny_cfg(1))
@@ -279,7 +281,21 @@ def test_position_space_on_maze_frames_is_the_token_space():
     pred = x0 + 0.1 * torch.randn(x0.shape, generator=torch.Generator().manual_seed(2))
     weight = torch.rand(4, x0.shape[1], generator=torch.Generator().manual_seed(3))
     assert float(boundary_loss(pred, x0, weight, 10, readout)) == float(boundary_loss(pred, x0, weight, 10))
+    token = (weight[..., None] * (pred - x0).square()).mean()
+    assert float(position_loss(pred, x0, weight, 10, readout)) == pytest.approx(float(token), rel=1e-6)
     assert prov["readout"]
+
+
+def test_position_loss_sees_only_what_the_readout_reads():
+    gen = torch.Generator().manual_seed(4)
+    x0 = torch.randn(2, 3, 3 * 4, generator=gen)  # 3 tokens of 4 three-dimensional frames
+    weight = torch.ones(2, 3)
+    readout = lambda f: f[..., :2]  # noqa: E731
+    unread, read = x0.clone(), x0.clone()
+    unread[..., 2::3] += 1.0  # every frame off along the third dim only
+    read[:, 1, 0::3] += 1.0  # token 1's frames off by 1 along the first dim
+    assert float(position_loss(unread, x0, weight, 4, readout)) == 0.0
+    assert float(position_loss(read, x0, weight, 4, readout)) == pytest.approx(4 / (3 * 4 * 2))  # 4 of 24 entries
 
 
 class _DataWithReadout(FakeData):
@@ -291,14 +307,19 @@ def test_position_space_is_recorded_and_bad_combinations_are_one_error_before_tr
     words = ("train.boundary_weight=3", "train.boundary_space=position", "train.ckpt_every=4")
     train(tiny_cfg(4, *words), _DataWithReadout(), tmp_path / "ok", progress=False)
     m = json.loads((tmp_path / "ok" / MANIFEST_FILE).read_text())
-    assert m["config"]["train"]["boundary_space"] == "position" and m["boundary_readout"] == {"readout": "a test map"}
+    assert m["config"]["train"]["boundary_space"] == "position" and m["position_readout"] == {"readout": "a test map"}
     with pytest.raises(ConfigError, match="no position readout.*train.boundary_space=token"):
         train(tiny_cfg(4, *words), FakeData(), tmp_path / "none", progress=False)
     with pytest.raises(ConfigError, match="train.boundary_weight=0.0"):
         train(tiny_cfg(4, "train.boundary_space=position"), _DataWithReadout(), tmp_path / "off", progress=False)
     with pytest.raises(ConfigError, match="train.boundary_space"):
         tiny_cfg(4, "train.boundary_space=latent")
-    assert not (tmp_path / "none").exists() and not (tmp_path / "off").exists()
+    with pytest.raises(ConfigError, match="train.position_weight=2.0: the pointmaze-medium data has no position"):
+        train(tiny_cfg(4, "train.position_weight=2"), FakeData(), tmp_path / "pos", progress=False)
+    train(tiny_cfg(4, "train.position_weight=2", "train.ckpt_every=4"), _DataWithReadout(), tmp_path / "pw",
+          progress=False)
+    assert json.loads((tmp_path / "pw" / MANIFEST_FILE).read_text())["config"]["train"]["position_weight"] == 2.0
+    assert not any((tmp_path / d).exists() for d in ("none", "off", "pos"))
 
 
 def test_validation_loss_leaves_the_boundary_term_out_so_arms_compare():

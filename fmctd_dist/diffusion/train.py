@@ -8,9 +8,10 @@ an uninterrupted one produce the same weights (bitwise on CPU). ``train.time_bud
 a run once its recorded wall time (or, ``train.budget_clock=cpu``, its CPU time) reaches the budget
 (recipe arms at equal compute); the recipe levers ``train.lr_schedule``, ``train.precision``
 (bf16 autocast of the training step), ``train.boundary_weight`` (a loss on the steps across
-token boundaries, measured in ``train.boundary_space``: the frames, or positions read from them) and
-``train.clean_context`` (the context token fed as the sampler feeds it) default
-to the paper's constant LR, fp32, plain token loss and noised context.
+token boundaries, measured in ``train.boundary_space``: the frames, or positions read from them),
+``train.position_weight`` (a loss on every frame's position as the data reads it) and
+``train.clean_context`` (the context token fed as the sampler feeds it) default to the paper's
+constant LR, fp32, plain token loss and noised context.
 """
 
 from __future__ import annotations
@@ -46,7 +47,7 @@ PAPER_TRAINING = {"df": {"layers": 12, "batch_size": 1024, "steps": 200_005},
                   "diffuser": {"batch_size": 32, "steps": 20_000, "unet_channels": [32, 128, 256]}}
 PAPER_RECIPE = {"model.param": "x0", "model.norm": "post", "train.lr_schedule": "constant", "train.precision": "fp32",
                 "train.boundary_weight": 0.0, "train.boundary_space": "token",
-                "train.clean_context": 0.0}
+                "train.position_weight": 0.0, "train.clean_context": 0.0}
 
 
 Readout = Callable[[torch.Tensor], torch.Tensor]  # normalised frames [..., d] -> standardised positions [..., 2]
@@ -80,7 +81,9 @@ class DFLoss(torch.nn.Module):
         self.clip_noise = cfg.diffusion.clip_noise
         self.frame_stack = cfg.model.frame_stack
         self.boundary_weight = cfg.train.boundary_weight
-        self.readout = readout  # train.boundary_space=position: frames -> positions (frozen)
+        self.readout = readout  # frames -> positions (frozen), for the position levers
+        self.boundary_readout = readout if cfg.train.boundary_space == "position" else None
+        self.position_weight = cfg.train.position_weight
         self.clean_context = cfg.train.clean_context
         self.context_t = dc.stabilization - 1  # the sampler's level-0 timestep (reference.md §5)
 
@@ -110,7 +113,10 @@ class DFLoss(torch.nn.Module):
         pred = model(xt, k)
         loss = (weight[..., None] * (pred - x0).square()).mean()
         if not validation and self.boundary_weight:
-            loss = loss + self.boundary_weight * boundary_loss(pred, x0, weight, self.frame_stack, self.readout)
+            loss = loss + self.boundary_weight * boundary_loss(pred, x0, weight, self.frame_stack,
+                                                               self.boundary_readout)
+        if not validation and self.position_weight:
+            loss = loss + self.position_weight * position_loss(pred, x0, weight, self.frame_stack, self.readout)
         return loss
 
 
@@ -133,6 +139,20 @@ def boundary_loss(pred: torch.Tensor, x0: torch.Tensor, weight: torch.Tensor, fr
 
     w = torch.minimum(weight[:, 1:], weight[:, :-1])  # [B, T-1]
     return (w[..., None] * (step(pred) - step(x0)).square()).mean()
+
+
+def position_loss(pred: torch.Tensor, x0: torch.Tensor, weight: torch.Tensor, frame_stack: int,
+                  readout: Readout) -> torch.Tensor:
+    """Weighted MSE of every frame's position as ``readout`` reads it, predicted vs true (train.position_weight).
+
+    The token loss weighs every frame dimension alike; where most of a frame's variance is in dimensions
+    that carry no position (a visual latent's view jitter), a prediction can be close in the frame
+    and far in position. This term measures the error where the plan's value and guidance measure it.
+    """
+    b, t, dd = x0.shape
+    frames = lambda x: x.reshape(b, t, frame_stack, dd // frame_stack)  # noqa: E731
+    err = (readout(frames(pred)) - readout(frames(x0))).square()  # [B, T, frame_stack, 2]
+    return (weight[..., None, None] * err).mean()
 
 
 class DiffuserLoss(torch.nn.Module):
@@ -177,28 +197,33 @@ def make_loss(cfg: Config, device: torch.device, readout: Readout | None = None)
     return DiffuserLoss(cfg, device) if cfg.model.kind == "diffuser" else DFLoss(cfg, device, readout)
 
 
-def boundary_readout(cfg: Config, data: Any, device: torch.device) -> tuple[Readout | None, dict[str, Any]]:
-    """train.boundary_space=position: the data's position readout (frozen) and what the manifest records.
+def position_readout(cfg: Config, data: Any, device: torch.device) -> tuple[Readout | None, dict[str, Any]]:
+    """The data's position readout (frozen) when a lever needs it (train.boundary_space=position,
+    train.position_weight>0), and what the manifest records.
 
     A data module offers ``position_readout(cfg) -> (readout, provenance)`` when its frames have a
-    position to read; asking for the position space on data without one, or with the loss off, is one
-    ConfigError before any training.
+    position to read; asking for a position lever on data without one, or for the position space of a
+    boundary loss that is off, is one ConfigError before any training.
     """
     tc = cfg.train
-    if tc.boundary_space == "token":
+    if tc.boundary_space == "token" and not tc.position_weight:
         return None, {}
-    if cfg.model.kind != "df" or not tc.boundary_weight:
+    if cfg.model.kind != "df":
+        raise ConfigError(f"train.boundary_space / train.position_weight are Diffusion Forcing levers, but "
+                          f"model.kind={cfg.model.kind}; drop them")
+    if tc.boundary_space == "position" and not tc.boundary_weight:
         raise ConfigError(f"train.boundary_space={tc.boundary_space} measures the token-boundary loss, which is off "
                           f"(train.boundary_weight={tc.boundary_weight}, model.kind={cfg.model.kind}); set "
                           "train.boundary_weight>0 on a model.kind=df model, or drop train.boundary_space")
     make = getattr(data, "position_readout", None)
     if make is None:
-        raise ConfigError(f"train.boundary_space=position: the {cfg.env.name} data has no position readout; use "
-                          "train.boundary_space=token")
+        raise ConfigError(f"train.boundary_space={tc.boundary_space}, train.position_weight={tc.position_weight}: "
+                          f"the {cfg.env.name} data has no position readout; use train.boundary_space=token and "
+                          "train.position_weight=0")
     readout, provenance = make(cfg)
     if isinstance(readout, torch.nn.Module):
         readout = readout.to(device).requires_grad_(False)
-    return readout, {"boundary_readout": provenance}
+    return readout, {"position_readout": provenance}
 
 
 def vs_paper(cfg: Config, step: int) -> str:
@@ -281,7 +306,7 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
         torch.manual_seed(tc.seed)
         model = build_model(cfg.model, cfg.n_tokens, cfg.token_dim, diffusion_cfg=cfg.diffusion).to(device)
     opt = torch.optim.AdamW(model.parameters(), lr=tc.lr, betas=(0.9, 0.999), weight_decay=tc.weight_decay)
-    readout, readout_provenance = boundary_readout(cfg, data, device)
+    readout, readout_provenance = position_readout(cfg, data, device)
     loss_fn = make_loss(cfg, device, readout)
     rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence([tc.seed, data.seed])))
     gen = torch.Generator(device=device).manual_seed(tc.seed)
@@ -332,7 +357,7 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
     base = {"dataset_digest": data.digest, "data_seed": data.seed, "git_sha": git_sha(),
             "normaliser": {"mean": data.normaliser.mean.tolist(), "std": data.normaliser.std.tolist()}}
     base.update(getattr(data, "provenance", {}))  # e.g. the visual maze's VAE and latent store
-    base.update(readout_provenance)  # train.boundary_space=position: which readout measured the loss
+    base.update(readout_provenance)  # the position levers: which readout measured their losses
     if init_from is not None:
         base["init_from"] = init_from
 
