@@ -263,11 +263,11 @@ class TrainConfig:
     # estimator ignores (frame-to-frame jitter), so a latent step that looks ordinary can be a 7-unit jump
     # in position (results 13.4, session 30): the position space weights the directions that matter.
     boundary_space: str = spec("token", choices=BOUNDARY_SPACES)
-    # A loss on every frame's position read the same way (readout of the prediction vs of the truth,
-    # min-SNR-weighted like the token loss): the token loss weighs a latent's position-blind jitter as
-    # much as its position. 0 = off (the paper's).
-    position_weight: float = spec(0.0, ge=0, why="weight of the per-frame position loss through the data's position "
-                                                 "readout (0 = off, the paper's)")
+    # A loss on the position of each token's two end frames, read the same way (readout of the prediction
+    # vs of the truth, min-SNR-weighted like the token loss): the token loss weighs a latent's
+    # position-blind jitter as much as its position. 0 = off (the paper's).
+    position_weight: float = spec(0.0, ge=0, why="weight of the position loss on each token's end frames through the "
+                                                 "data's position readout (0 = off, the paper's)")
     # Recipe lever against the plans' first-step jump (results §4, session 21): the sampler always feeds
     # the context token clean (timestep diffusion.stabilization - 1, scaled, no noise), but the paper's
     # training noises it at a random timestep (half the time in [0, 250), else anywhere), so that exact

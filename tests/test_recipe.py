@@ -281,7 +281,8 @@ def test_position_space_on_maze_frames_is_the_token_space():
     pred = x0 + 0.1 * torch.randn(x0.shape, generator=torch.Generator().manual_seed(2))
     weight = torch.rand(4, x0.shape[1], generator=torch.Generator().manual_seed(3))
     assert float(boundary_loss(pred, x0, weight, 10, readout)) == float(boundary_loss(pred, x0, weight, 10))
-    token = (weight[..., None] * (pred - x0).square()).mean()
+    ends = [0, 1, 18, 19]  # the (x, y) of each token's first and last frame
+    token = (weight[..., None] * (pred - x0)[..., ends].square()).mean()
     assert float(position_loss(pred, x0, weight, 10, readout)) == pytest.approx(float(token), rel=1e-6)
     assert prov["readout"]
 
@@ -295,7 +296,11 @@ def test_position_loss_sees_only_what_the_readout_reads():
     unread[..., 2::3] += 1.0  # every frame off along the third dim only
     read[:, 1, 0::3] += 1.0  # token 1's frames off by 1 along the first dim
     assert float(position_loss(unread, x0, weight, 4, readout)) == 0.0
-    assert float(position_loss(read, x0, weight, 4, readout)) == pytest.approx(4 / (3 * 4 * 2))  # 4 of 24 entries
+    # token 1's two end frames, one of two position dims: 2 of the 3 tokens x 2 ends x 2 dims = 12 entries
+    assert float(position_loss(read, x0, weight, 4, readout)) == pytest.approx(2 / 12)
+    inner = x0.clone()
+    inner[:, 1, 3:6] += 1.0  # an inner frame (frame 1 of token 1) is not read
+    assert float(position_loss(inner, x0, weight, 4, readout)) == 0.0
 
 
 class _DataWithReadout(FakeData):
