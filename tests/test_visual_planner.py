@@ -332,3 +332,17 @@ def test_fast_mctd_with_the_wider_warp_threshold_solves_task2_seed0():
         row = hooks_for(MEDIUM).episodes(cfg).run(planner, 2, 0)
     assert row["success"], f"failed after {row['env_steps']} steps ({row['plan_status']})"
     assert row["plan_status"] == "early_stop" and row["env_steps"] < 300
+
+
+def test_latent_aliasing_probe_tells_a_faithful_latent_space_from_an_aliased_one():
+    """jobs/visual_latent_aliasing.py: latents equal to positions keep far places far (0%); latents that wrap
+    every 5 units put a far place within one step (near 100%)."""
+    from conftest import load_job
+
+    probe = load_job("visual_latent_aliasing")
+    rng = np.random.default_rng(0)
+    walk = np.cumsum(rng.normal(scale=0.2, size=(20, 300, 2)), axis=1) + rng.uniform(0, 20, size=(20, 1, 2))
+    same = probe.aliasing(walk, walk, lambda z: z, far=5.0)
+    wrapped = probe.aliasing(np.mod(walk, 5.0), walk, lambda z: z, far=5.0)
+    assert same["share_closer_than_p99_step"] == 0.0 and same["far_neighbour_median"] >= 5.0
+    assert wrapped["share_closer_than_p99_step"] > 0.9

@@ -1,0 +1,65 @@
+"""Probe: does the VAE's latent space keep distant places apart, at the scale of one frame's step?
+
+    python jobs/visual_latent_aliasing.py visual.episodes=100                       # medium, the latent store
+    python jobs/visual_latent_aliasing.py env=visual-pointmaze-large visual.episodes=100
+
+The latent planner learns the step statistics of real latent paths in normalised latent units
+(the units of its loss). If two real frames far apart in the maze lie closer in latent space than
+a real frame-to-frame step often is, a plan can cross between them in one ordinary-looking step:
+the estimator then reads a teleport. This reads only data (no planner): the normalised step between
+consecutive train latents, and for a seeded sample of train latents the nearest train latent at
+least ``far`` world units away (positions read by the position estimator), and prints how often
+that far neighbour is closer than the data's own p99 step.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fmctd_dist.cli import run
+from fmctd_dist.config import load_config
+from fmctd_dist.device import set_threads
+
+QUERIES = 500  # seeded train latents whose far neighbour is searched
+POOL = 20_000  # train latents searched (every k-th frame)
+
+
+def aliasing(z: np.ndarray, xy: np.ndarray, zn_of, far: float, seed: int = 0) -> dict[str, float]:
+    """z [E, S, D] train latents, xy [E, S, 2] their positions, zn_of: latents -> normalised latents."""
+    steps = np.linalg.norm(np.diff(zn_of(z), axis=1), axis=-1).ravel()
+    flat_z, flat_xy = z.reshape(-1, z.shape[-1]), xy.reshape(-1, 2)
+    pick = np.arange(0, len(flat_z), max(1, len(flat_z) // POOL))[:POOL]
+    zn, pxy = zn_of(flat_z[pick]), flat_xy[pick]
+    queries = np.random.default_rng(seed).choice(len(zn), min(QUERIES, len(zn)), replace=False)
+    nearest = []
+    for i in queries:
+        away = np.linalg.norm(pxy - pxy[i], axis=-1) >= far
+        if away.any():
+            nearest.append(float(np.linalg.norm(zn[away] - zn[i], axis=-1).min()))
+    nearest_a = np.asarray(nearest)
+    p99 = float(np.percentile(steps, 99))
+    return {"step_median": float(np.median(steps)), "step_p99": p99, "far": far, "queries": len(nearest_a),
+            "far_neighbour_median": float(np.median(nearest_a)), "far_neighbour_p10": float(np.percentile(nearest_a, 10)),
+            "share_closer_than_p99_step": float(np.mean(nearest_a < p99))}
+
+
+def main(argv: list[str]) -> int:
+    from fmctd_dist.data.visual_dataset import load_visual_dataset
+    from fmctd_dist.visual.guide import Positions, load_estimator_net
+
+    cfg = load_config(argv, env="visual-pointmaze-medium", method="diffusion-forcing")
+    set_threads(cfg.eval.threads or 1)
+    ds = load_visual_dataset(cfg)
+    net, _ = load_estimator_net(cfg, str(ds.manifest["vae"]["digest"]), int(ds.manifest["latent_dim"]))
+    xy = Positions(net)(ds.train)
+    r = aliasing(ds.train, xy, ds.normaliser.normalise, far=5.0)
+    print(f"{ds.path}: {ds.train.shape[0]} train episodes; latent distances in normalised units (the planner's)")
+    print("| consecutive step: median / p99 | nearest latent >= 5 units away: median / p10 | "
+          "far neighbours closer than the p99 step |\n|---|---|---|")
+    print(f"| {r['step_median']:.2f} / {r['step_p99']:.2f} | {r['far_neighbour_median']:.2f} / "
+          f"{r['far_neighbour_p10']:.2f} | {r['share_closer_than_p99_step']:.0%} of {r['queries']} |")
+    return 0
+
+
+if __name__ == "__main__":
+    run(main)
