@@ -1,7 +1,8 @@
 """Probe: does the VAE's latent space keep distant places apart, at the scale of one frame's step?
 
-    python jobs/visual_latent_aliasing.py visual.episodes=100                       # medium, the latent store
+    python jobs/visual_latent_aliasing.py visual.episodes=100                       # medium, the shipped H=5 model
     python jobs/visual_latent_aliasing.py env=visual-pointmaze-large visual.episodes=100
+    python jobs/visual_latent_aliasing.py visual.episodes=100 jump=1 checkpoint=runs/visual/s29-h1-e100-bw3-cos
 
 The latent planner learns the step statistics of real latent paths in normalised latent units
 (the units of its loss). If two real frames far apart in the maze lie closer in latent space than
@@ -9,7 +10,12 @@ a real frame-to-frame step often is, a plan can cross between them in one ordina
 the estimator then reads a teleport. This reads only data (no planner): the normalised step between
 consecutive train latents, and for a seeded sample of train latents the nearest train latent at
 least ``far`` world units away (positions read by the position estimator), and prints how often
-that far neighbour is closer than the data's own p99 step.
+that far neighbour is closer than the data's own p99 step. Then, for the planner of ``checkpoint=``,
+it samples unguided Diffusion Forcing plans from seeded validation starts and looks at each plan's
+largest estimated step: how far its two frames are from the nearest train latents (beside that
+distance for held-out real latents), and how far apart those two nearest real latents are, in latent
+units and in world units. Near-real frames whose nearest reals are close in latent space but far in
+the maze are a crossing between aliased places, not a sample off the manifold.
 """
 
 from __future__ import annotations
@@ -22,6 +28,7 @@ from fmctd_dist.device import set_threads
 
 QUERIES = 500  # seeded train latents whose far neighbour is searched
 POOL = 20_000  # train latents searched (every k-th frame)
+PLANS = 6  # unguided plans whose largest step is looked at
 
 
 def aliasing(z: np.ndarray, xy: np.ndarray, zn_of, far: float, seed: int = 0) -> dict[str, float]:
@@ -43,11 +50,48 @@ def aliasing(z: np.ndarray, xy: np.ndarray, zn_of, far: float, seed: int = 0) ->
             "share_closer_than_p99_step": float(np.mean(nearest_a < p99))}
 
 
+def nearest(zn: np.ndarray, pool: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Normalised latents [N, D] -> (distance to, index of) the nearest of ``pool`` [M, D]."""
+    d = np.linalg.norm(pool[None] - zn[:, None], axis=-1)
+    i = d.argmin(1)
+    return d[np.arange(len(zn)), i], i
+
+
+def largest_steps(cfg, ds, positions) -> list[str]:
+    """Table rows: each unguided plan's largest estimated step and what lies on either side of it."""
+    from fmctd_dist.visual.plan_quality import visual_planner
+
+    planner, _, manifest, norm = visual_planner(cfg)
+    flat = ds.train.reshape(-1, ds.train.shape[-1])
+    pool_z = flat[:: max(1, len(flat) // POOL)][:POOL]
+    pool, pool_xy = norm.normalise(pool_z), positions(pool_z)
+    real, _ = nearest(norm.normalise(ds.val.reshape(-1, ds.val.shape[-1])[::97][:300]), pool)
+    rows = [f"{cfg.checkpoint_dir()} ({manifest['digest']}); held-out real latents' distance to the nearest train "
+            f"latent: median {np.median(real):.2f}, p90 {np.percentile(real, 90):.2f}",
+            "| plan | largest step (world units) at plan frame | its frames' distance to the nearest train latent | "
+            "those two train latents apart: latent / world units |", "|---|---|---|---|"]
+    span = cfg.env.horizon - cfg.jump
+    rng = np.random.default_rng(0)
+    for i in range(PLANS):
+        e, t = int(rng.integers(len(ds.val))), int(rng.integers(ds.val.shape[1] - span))
+        z = ds.val[e, t]
+        plan = np.concatenate([z[None], planner.plan(z, ds.val[e, t + span], i).waypoints[:: cfg.jump]])
+        xy = positions(plan)
+        k = int(np.linalg.norm(np.diff(xy, axis=0), axis=-1).argmax())
+        d, idx = nearest(norm.normalise(plan[[k, k + 1]]), pool)
+        rows.append(f"| {i} | {np.linalg.norm(xy[k + 1] - xy[k]):.2f} at {k} | {d[0]:.2f} / {d[1]:.2f} | "
+                    f"{np.linalg.norm(pool[idx[0]] - pool[idx[1]]):.2f} / "
+                    f"{np.linalg.norm(pool_xy[idx[0]] - pool_xy[idx[1]]):.2f} |")
+    return rows
+
+
 def main(argv: list[str]) -> int:
     from fmctd_dist.data.visual_dataset import load_visual_dataset
     from fmctd_dist.visual.guide import Positions, load_estimator_net
 
-    cfg = load_config(argv, env="visual-pointmaze-medium", method="diffusion-forcing")
+    given = {w.split("=", 1)[0] for w in argv}
+    defaults = [w for w in ("jump=5", "method.guidance_scale=0.0") if w.split("=", 1)[0] not in given]
+    cfg = load_config(defaults + argv, env="visual-pointmaze-medium", method="diffusion-forcing")
     set_threads(cfg.eval.threads or 1)
     ds = load_visual_dataset(cfg)
     net, _ = load_estimator_net(cfg, str(ds.manifest["vae"]["digest"]), int(ds.manifest["latent_dim"]))
@@ -58,6 +102,7 @@ def main(argv: list[str]) -> int:
           "far neighbours closer than the p99 step |\n|---|---|---|")
     print(f"| {r['step_median']:.2f} / {r['step_p99']:.2f} | {r['far_neighbour_median']:.2f} / "
           f"{r['far_neighbour_p10']:.2f} | {r['share_closer_than_p99_step']:.0%} of {r['queries']} |")
+    print("\n".join(largest_steps(cfg, ds, Positions(net))))
     return 0
 
 
