@@ -221,7 +221,7 @@ class NavigateDataset:
 
     def position_readout(self, cfg: Config) -> tuple[Any, dict[str, Any]]:
         """A frame is its normalised (x, y): the readout is the frame itself (train.boundary_space=position
-        then equals token)."""
+        then equals token, and train.position_weight weighs the token loss's end frames again)."""
         return _frame_xy, {"readout": "the frames' normalised x, y"}
 
 

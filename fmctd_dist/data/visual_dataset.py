@@ -65,7 +65,8 @@ class VisualLatentDataset:
 
     def position_readout(self, cfg: Config) -> tuple[Any, dict[str, Any]]:
         """Normalised latent frames -> standardised (x, y) through the frozen position estimator of this
-        store's VAE: the map guidance reads (``visual/guide.py``), for train.boundary_space=position."""
+        store's VAE, the map guidance reads (``visual/guide.py``); for train.boundary_space=position and
+        train.position_weight."""
         from fmctd_dist.visual.guide import EstimatorGuide, load_estimator_net
 
         net, m = load_estimator_net(cfg, str(self.manifest["vae"]["digest"]), int(self.manifest["latent_dim"]))

@@ -9,7 +9,7 @@ a run once its recorded wall time (or, ``train.budget_clock=cpu``, its CPU time)
 (recipe arms at equal compute); the recipe levers ``train.lr_schedule``, ``train.precision``
 (bf16 autocast of the training step), ``train.boundary_weight`` (a loss on the steps across
 token boundaries, measured in ``train.boundary_space``: the frames, or positions read from them),
-``train.position_weight`` (a loss on every frame's position as the data reads it) and
+``train.position_weight`` (a loss on the positions of each token's end frames) and
 ``train.clean_context`` (the context token fed as the sampler feeds it) default to the paper's
 constant LR, fp32, plain token loss and noised context.
 """
