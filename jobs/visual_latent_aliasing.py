@@ -46,7 +46,8 @@ def aliasing(z: np.ndarray, xy: np.ndarray, zn_of, far: float, seed: int = 0) ->
     nearest_a = np.asarray(nearest)
     p99 = float(np.percentile(steps, 99))
     return {"step_median": float(np.median(steps)), "step_p99": p99, "far": far, "queries": len(nearest_a),
-            "far_neighbour_median": float(np.median(nearest_a)), "far_neighbour_p10": float(np.percentile(nearest_a, 10)),
+            "far_neighbour_median": float(np.median(nearest_a)),
+            "far_neighbour_p10": float(np.percentile(nearest_a, 10)),
             "share_closer_than_p99_step": float(np.mean(nearest_a < p99))}
 
 
