@@ -25,9 +25,8 @@ from __future__ import annotations
 import numpy as np
 
 from fmctd_dist.cli import run
-from fmctd_dist.config import load_config
 from fmctd_dist.device import set_threads
-from fmctd_dist.visual.plan_quality import task_latents, visual_planner
+from fmctd_dist.visual.plan_quality import probe_config, task_latents, visual_planner
 
 WINDOWS = 20  # validation starts
 
@@ -35,9 +34,7 @@ WINDOWS = 20  # validation starts
 def main(argv: list[str]) -> int:
     from fmctd_dist.data.visual_dataset import load_visual_dataset
 
-    given = {w.split("=", 1)[0] for w in argv}
-    defaults = [w for w in ("jump=5", "method.guidance_scale=0.0") if w.split("=", 1)[0] not in given]
-    cfg = load_config(defaults + argv, env="visual-pointmaze-medium", method="diffusion-forcing")
+    cfg = probe_config(argv)
     set_threads(cfg.eval.threads or 1)
     planner, episodes, manifest, norm = visual_planner(cfg)
     pos, jump = episodes.positions, cfg.jump

@@ -23,19 +23,24 @@ from __future__ import annotations
 import numpy as np
 
 from fmctd_dist.cli import run
-from fmctd_dist.config import load_config
 from fmctd_dist.device import set_threads
+from fmctd_dist.visual.plan_quality import probe_config
 
 QUERIES = 500  # seeded train latents whose far neighbour is searched
 POOL = 20_000  # train latents searched (every k-th frame)
 PLANS = 6  # unguided plans whose largest step is looked at
 
 
+def pool_index(n: int) -> np.ndarray:
+    """Indices of the searched train latents among ``n`` flattened ones: every k-th, at most POOL."""
+    return np.arange(0, n, max(1, n // POOL))[:POOL]
+
+
 def aliasing(z: np.ndarray, xy: np.ndarray, zn_of, far: float, seed: int = 0) -> dict[str, float]:
     """z [E, S, D] train latents, xy [E, S, 2] their positions, zn_of: latents -> normalised latents."""
     steps = np.linalg.norm(np.diff(zn_of(z), axis=1), axis=-1).ravel()
     flat_z, flat_xy = z.reshape(-1, z.shape[-1]), xy.reshape(-1, 2)
-    pick = np.arange(0, len(flat_z), max(1, len(flat_z) // POOL))[:POOL]
+    pick = pool_index(len(flat_z))
     zn, pxy = zn_of(flat_z[pick]), flat_xy[pick]
     queries = np.random.default_rng(seed).choice(len(zn), min(QUERIES, len(zn)), replace=False)
     nearest = []
@@ -58,14 +63,17 @@ def nearest(zn: np.ndarray, pool: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return d[np.arange(len(zn)), i], i
 
 
-def largest_steps(cfg, ds, positions) -> list[str]:
-    """Table rows: each unguided plan's largest estimated step and what lies on either side of it."""
+def largest_steps(cfg, ds, train_xy: np.ndarray, positions) -> list[str]:
+    """Table rows: each unguided plan's largest estimated step and what lies on either side of it.
+
+    ``train_xy`` [E, S, 2] are the train latents' estimated positions (main's), ``positions`` the estimator.
+    """
     from fmctd_dist.visual.plan_quality import visual_planner
 
     planner, _, manifest, norm = visual_planner(cfg)
     flat = ds.train.reshape(-1, ds.train.shape[-1])
-    pool_z = flat[:: max(1, len(flat) // POOL)][:POOL]
-    pool, pool_xy = norm.normalise(pool_z), positions(pool_z)
+    pick = pool_index(len(flat))
+    pool, pool_xy = norm.normalise(flat[pick]), train_xy.reshape(-1, 2)[pick]
     real, _ = nearest(norm.normalise(ds.val.reshape(-1, ds.val.shape[-1])[::97][:300]), pool)
     rows = [f"{cfg.checkpoint_dir()} ({manifest['digest']}); held-out real latents' distance to the nearest train "
             f"latent: median {np.median(real):.2f}, p90 {np.percentile(real, 90):.2f}",
@@ -90,20 +98,19 @@ def main(argv: list[str]) -> int:
     from fmctd_dist.data.visual_dataset import load_visual_dataset
     from fmctd_dist.visual.guide import Positions, load_estimator_net
 
-    given = {w.split("=", 1)[0] for w in argv}
-    defaults = [w for w in ("jump=5", "method.guidance_scale=0.0") if w.split("=", 1)[0] not in given]
-    cfg = load_config(defaults + argv, env="visual-pointmaze-medium", method="diffusion-forcing")
+    cfg = probe_config(argv)
     set_threads(cfg.eval.threads or 1)
     ds = load_visual_dataset(cfg)
     net, _ = load_estimator_net(cfg, str(ds.manifest["vae"]["digest"]), int(ds.manifest["latent_dim"]))
-    xy = Positions(net)(ds.train)
+    positions = Positions(net)
+    xy = positions(ds.train)
     r = aliasing(ds.train, xy, ds.normaliser.normalise, far=5.0)
     print(f"{ds.path}: {ds.train.shape[0]} train episodes; latent distances in normalised units (the planner's)")
     print("| consecutive step: median / p99 | nearest latent >= 5 units away: median / p10 | "
           "far neighbours closer than the p99 step |\n|---|---|---|")
     print(f"| {r['step_median']:.2f} / {r['step_p99']:.2f} | {r['far_neighbour_median']:.2f} / "
           f"{r['far_neighbour_p10']:.2f} | {r['share_closer_than_p99_step']:.0%} of {r['queries']} |")
-    print("\n".join(largest_steps(cfg, ds, Positions(net))))
+    print("\n".join(largest_steps(cfg, ds, xy, positions)))
     return 0
 
 

@@ -74,6 +74,9 @@ def make_episodes(cfg: Config, pcfg: PartsConfig, progress: bool = True) -> tupl
     actions = {s: _actions(cfg, s) for s in ("train", "val")}
     with tqdm(total=len(todo) * steps, desc=f"episodes {cfg.env.name}", unit="frame", disable=not progress) as bar:
         for split, e in todo:
+            if (out / _file(split, e)).exists():  # another process of this job rendered it meanwhile
+                bar.update(steps)
+                continue
             renderer = renderer or FrameRenderer(cfg.env.name, shadowsize=cfg.visual.shadowsize)
             xy = getattr(data, split)[e].astype(np.float64)
             images = np.concatenate([renderer.render(xy[a:a + 100]) for a in range(0, steps, 100)])

@@ -50,6 +50,15 @@ class TaskSearch:
     plan_time_s: float
 
 
+def probe_config(argv: list[str]) -> Config:
+    """The latent-plan probes' config: unguided Diffusion Forcing at jump 5 on visual medium unless ``argv`` says otherwise."""
+    from fmctd_dist.config import load_config
+
+    given = {w.split("=", 1)[0] for w in argv}
+    defaults = [w for w in ("jump=5", "method.guidance_scale=0.0") if w.split("=", 1)[0] not in given]
+    return load_config(defaults + argv, env="visual-pointmaze-medium", method="diffusion-forcing")
+
+
 def visual_planner(cfg: Config) -> tuple[Any, Any, dict[str, Any], Any]:
     """(planner, the family's episode parts, the planner's manifest, its normaliser) for ``cfg``'s checkpoint."""
     from fmctd_dist.denoiser.local import LocalDenoiser
