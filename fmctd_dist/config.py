@@ -372,6 +372,10 @@ class VisualConfig:
     # Train episodes whose every frame is rendered and encoded for the planner's latent data, a
     # seeded subset (recorded in the latent manifest); 0 = all of data.episodes
     episodes: int = spec(100, ge=0, why="seeded subset of train episodes for the latent data; 0 = all")
+    # Plan [z, x, y] frames: each latent with the position estimator's reading of it (data/visual_dataset.py),
+    # so the diffusion loss sees positions and guidance / value read the plan's own (x, y) (our variant:
+    # the paper plans latents only). A planner checkpoint is trained for one choice.
+    plan_xy: bool = False
 
 
 @dataclass
@@ -408,8 +412,9 @@ class Config:
 
     @property
     def frame_dim(self) -> int:
-        """Numbers per plan frame: the env family's planner state (maze x, y: 2; cube xyz: 3 per cube)."""
-        return state_dim(self.env.name)
+        """Numbers per plan frame: the env family's planner state (maze x, y: 2; cube xyz: 3 per cube; a
+        visual latent: 8, or 10 with visual.plan_xy's estimated x, y)."""
+        return state_dim(self.env.name) + (2 if self.visual.plan_xy else 0)
 
     @property
     def token_dim(self) -> int:
@@ -599,6 +604,9 @@ def validate(cfg: Config) -> None:
     """Declared ranges, then cross-field checks; raise one ConfigError naming the field and the fix."""
     check_ranges(cfg)
     check_env_fields(cfg.env)
+    if cfg.visual.plan_xy and family(cfg.env.name) != "visual-pointmaze":
+        raise ConfigError(f"visual.plan_xy=true adds the position estimator's (x, y) to a visual maze's latent "
+                          f"frames; env.name={cfg.env.name} ({family(cfg.env.name)}) has no latents. Drop visual.plan_xy")
     if cfg.method.wall_test and family(cfg.env.name) not in MAZE_FAMILIES:
         raise ConfigError(f"method.wall_test=true needs a point or ant maze (the walls come from its cells); "
                           f"env.name={cfg.env.name} ({family(cfg.env.name)}) has none. Drop method.wall_test")

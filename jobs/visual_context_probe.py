@@ -26,7 +26,7 @@ import numpy as np
 
 from fmctd_dist.cli import run
 from fmctd_dist.device import set_threads
-from fmctd_dist.visual.plan_quality import probe_config, task_latents, visual_planner
+from fmctd_dist.visual.plan_quality import probe_config, task_frames, visual_planner
 
 WINDOWS = 20  # validation starts
 
@@ -38,7 +38,7 @@ def main(argv: list[str]) -> int:
     set_threads(cfg.eval.threads or 1)
     planner, episodes, manifest, norm = visual_planner(cfg)
     pos, jump = episodes.positions, cfg.jump
-    val = load_visual_dataset(cfg).val  # [E, S, D] the held-out episodes' mu
+    val = load_visual_dataset(cfg).val  # [E, S, D] the held-out episodes' planner frames
     span = cfg.env.horizon - jump
     rng = np.random.default_rng(0)
     starts = []  # (kind, start z, goal z, recorded next z or None)
@@ -46,7 +46,7 @@ def main(argv: list[str]) -> int:
         e, t = int(rng.integers(len(val))), int(rng.integers(val.shape[1] - span))
         starts.append(("validation", val[e, t], val[e, t + span], val[e, t + jump]))
     for task in cfg.eval.tasks:
-        starts.append(("reset", *task_latents(episodes, task), None))
+        starts.append(("reset", *task_frames(episodes, task), None))
     stats: dict[str, dict[str, list[float]]] = {}
     for i, (kind, z, zg, nxt) in enumerate(starts):
         plan = planner.plan(z, zg, i).waypoints[::jump]  # [F, D] one frame per plan step

@@ -63,14 +63,16 @@ def nearest(zn: np.ndarray, pool: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return d[np.arange(len(zn)), i], i
 
 
-def largest_steps(cfg, ds, train_xy: np.ndarray, positions) -> list[str]:
-    """Table rows: each unguided plan's largest estimated step and what lies on either side of it.
+def largest_steps(cfg, ds, train_xy: np.ndarray) -> list[str]:
+    """Table rows: each unguided plan's largest step and what lies on either side of it.
 
-    ``train_xy`` [E, S, 2] are the train latents' estimated positions (main's), ``positions`` the estimator.
+    ``train_xy`` [E, S, 2] are the train latents' estimated positions (main's). Plans are read as the
+    planner's value reads them (estimated positions; with visual.plan_xy, the plan's own x, y).
     """
     from fmctd_dist.visual.plan_quality import visual_planner
 
-    planner, _, manifest, norm = visual_planner(cfg)
+    planner, episodes, manifest, norm = visual_planner(cfg)
+    positions = episodes.positions
     flat = ds.train.reshape(-1, ds.train.shape[-1])
     pick = pool_index(len(flat))
     pool, pool_xy = norm.normalise(flat[pick]), train_xy.reshape(-1, 2)[pick]
@@ -102,15 +104,16 @@ def main(argv: list[str]) -> int:
     set_threads(cfg.eval.threads or 1)
     ds = load_visual_dataset(cfg)
     net, _ = load_estimator_net(cfg, str(ds.manifest["vae"]["digest"]), int(ds.manifest["latent_dim"]))
-    positions = Positions(net)
-    xy = positions(ds.train)
-    r = aliasing(ds.train, xy, ds.normaliser.normalise, far=5.0)
+    latents = ds.train[..., :int(ds.manifest["latent_dim"])]  # visual.plan_xy frames: the latent part
+    xy = Positions(net)(latents)
+    norm, dim = ds.normaliser, latents.shape[-1]
+    r = aliasing(latents, xy, lambda z: (z - norm.mean[:dim]) / norm.std[:dim], far=5.0)
     print(f"{ds.path}: {ds.train.shape[0]} train episodes; latent distances in normalised units (the planner's)")
     print("| consecutive step: median / p99 | nearest latent >= 5 units away: median / p10 | "
           "far neighbours closer than the p99 step |\n|---|---|---|")
     print(f"| {r['step_median']:.2f} / {r['step_p99']:.2f} | {r['far_neighbour_median']:.2f} / "
           f"{r['far_neighbour_p10']:.2f} | {r['share_closer_than_p99_step']:.0%} of {r['queries']} |")
-    print("\n".join(largest_steps(cfg, ds, xy, positions)))
+    print("\n".join(largest_steps(cfg, ds, xy)))
     return 0
 
 

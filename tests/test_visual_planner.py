@@ -22,8 +22,20 @@ from fmctd_dist.errors import CheckpointError, ConfigError
 MEDIUM = "visual-pointmaze-medium"
 SHIPPED = REPO_ROOT / "checkpoints" / f"{MEDIUM}-h5"
 needs_shipped = pytest.mark.skipif(not (SHIPPED / "model.pt").exists(), reason=f"{SHIPPED} is not shipped")
-needs_latents = pytest.mark.skipif(not list((REPO_ROOT / "data").glob(f"{MEDIUM}-latents-*/latents.npz")),
-                                   reason="the medium latent store is not made (jobs/train_visual.py part=latents)")
+
+
+def _default_store() -> Path:
+    """The latent store of the default medium config (visual.episodes from its env yaml)."""
+    from fmctd_dist.visual.config import PartsConfig
+    from fmctd_dist.visual.latents import latents_dir
+
+    vae = json.loads((REPO_ROOT / f"checkpoints/{MEDIUM}-vae/manifest.json").read_text())["digest"]
+    return latents_dir(load_config([f"env={MEDIUM}"]), PartsConfig(), vae) / "latents.npz"
+
+
+needs_latents = pytest.mark.skipif(not _default_store().exists(),
+                                   reason="the default medium latent store is not made (jobs/train_visual.py "
+                                          "part=latents env=visual-pointmaze-medium)")
 
 
 def _fake_dataset(d: int = 8, episodes: int = 2, steps: int = 1001):

@@ -13,6 +13,9 @@ sha256 (a function of the VAE's weights) and :attr:`VisualLatentDataset.provenan
 model's manifest: the VAE digest and dir, the store's dir, sha256 and episode ids, and the mean /
 std of the train positions (the scale in which guidance measures distances, ``visual/guide.py``).
 ``hooks/visual.py`` refuses a model whose manifest names another VAE than the one it loads.
+
+With ``visual.plan_xy=true`` each frame is [mu, estimator(mu)] (``visual/frames_xy.py``): the
+digest then adds the estimator's, and the provenance says ``plan_xy``.
 """
 
 from __future__ import annotations
@@ -26,16 +29,17 @@ import numpy as np
 from fmctd_dist.config import Config
 from fmctd_dist.data.tokens import Normaliser
 from fmctd_dist.errors import DatasetError
-from fmctd_dist.families import require_family
+from fmctd_dist.families import require_family, state_dim
 from fmctd_dist.hints import shown
 from fmctd_dist.visual.config import LATENT_KEY, part_dir
+from fmctd_dist.visual.frames_xy import PlanFrames
 
 VISUAL_FAMILY = "visual-pointmaze"
 
 
 @dataclass
 class VisualLatentDataset:
-    """mu [E, S, D] per split, the surface ``data/windows.py`` reads (train, val, normaliser, digest)."""
+    """mu [E, S, D] (visual.plan_xy: [mu, estimated x, y], D + 2) per split, the surface ``data/windows.py`` reads (train, val, normaliser, digest)."""
 
     path: Path
     manifest: dict[str, Any]  # the latent store's manifest
@@ -43,10 +47,16 @@ class VisualLatentDataset:
     val: np.ndarray  # [E_val, S, D] float32
     xy_mean: np.ndarray  # [2] world units, of the train frames
     xy_std: np.ndarray  # [2]
+    estimator_digest: str | None = None  # visual.plan_xy: the estimator whose (x, y) the frames carry
+
+    @property
+    def plan_xy(self) -> bool:
+        return self.estimator_digest is not None
 
     @property
     def digest(self) -> str:
-        return str(self.manifest["sha256"])
+        sha = str(self.manifest["sha256"])
+        return f"{sha}+xy{self.estimator_digest}" if self.plan_xy else sha
 
     @property
     def normaliser(self) -> Normaliser:
@@ -61,16 +71,20 @@ class VisualLatentDataset:
                              "store": shown(self.path), "store_sha256": m["sha256"],
                              "latent_dim": int(m["latent_dim"]), "episodes": list(m["episodes"]),
                              "val_episodes": list(m["val_episodes"]), "frames_digest": m["frames_digest"],
-                             "xy_mean": self.xy_mean.tolist(), "xy_std": self.xy_std.tolist()}}
+                             "xy_mean": self.xy_mean.tolist(), "xy_std": self.xy_std.tolist(),
+                             **({"plan_xy": True, "estimator_digest": self.estimator_digest} if self.plan_xy else {})}}
 
     def position_readout(self, cfg: Config) -> tuple[Any, dict[str, Any]]:
-        """Normalised latent frames -> standardised (x, y) through the frozen position estimator of this
-        store's VAE, the map guidance reads (``visual/guide.py``); for train.boundary_space=position and
-        train.position_weight."""
-        from fmctd_dist.visual.guide import EstimatorGuide, load_estimator_net
+        """Normalised frames -> standardised (x, y), the map guidance reads (``visual/guide.py``): through the
+        frozen position estimator of this store's VAE, or (visual.plan_xy) the frames' own (x, y); for
+        train.boundary_space=position and train.position_weight."""
+        from fmctd_dist.visual.guide import EstimatorGuide, XYReadout, load_estimator_net
 
-        net, m = load_estimator_net(cfg, str(self.manifest["vae"]["digest"]), int(self.manifest["latent_dim"]))
-        norm = self.normaliser
+        norm, dim = self.normaliser, int(self.manifest["latent_dim"])
+        if self.plan_xy:
+            return (XYReadout(dim, norm.mean, norm.std, self.xy_mean, self.xy_std),
+                    {"readout": "the frames' (x, y) (visual.plan_xy)", "estimator_digest": self.estimator_digest})
+        net, m = load_estimator_net(cfg, str(self.manifest["vae"]["digest"]), dim)
         guide = EstimatorGuide(net, norm.mean, norm.std, self.xy_mean, self.xy_std)
         return guide, {"readout": "position estimator", "estimator": shown(part_dir(cfg, "", "estimator")),
                        "estimator_digest": m.get("digest")}
@@ -99,17 +113,25 @@ def load_visual_dataset(cfg: Config) -> VisualLatentDataset:
     pcfg = _parts(cfg)
     vae = load_vae(vae_dir(cfg, pcfg), cfg.env.name)
     store = load_latents(cfg, pcfg, vae)
-    if vae.latent_dim != cfg.frame_dim:
+    latent_dim = state_dim(cfg.env.name)
+    if vae.latent_dim != latent_dim:
         raise DatasetError(f"{store.path}: latents of {vae.latent_dim} dims, but env.name={cfg.env.name} plans "
-                           f"{cfg.frame_dim}-D latents (families.ENVS); train the VAE with vae.latent_dim="
-                           f"{cfg.frame_dim}")
+                           f"{latent_dim}-D latents (families.ENVS); train the VAE with vae.latent_dim="
+                           f"{latent_dim}")
     train, val = store.split("train"), store.split("val")
     if val["mu"].shape[0] == 0:
         raise DatasetError(f"{store.path} holds no validation episodes; rerun `python jobs/train_visual.py "
                            f"part=latents env={cfg.env.name} latents.val_episodes=5`")
     xy = train["xy"].reshape(-1, 2).astype(np.float64)
-    return VisualLatentDataset(store.path, store.manifest, np.ascontiguousarray(train["mu"], np.float32),
-                               np.ascontiguousarray(val["mu"], np.float32), xy.mean(0), xy.std(0))
+    frames, est_digest = PlanFrames(lambda z: z, latent_dim, False), None
+    if cfg.visual.plan_xy:
+        from fmctd_dist.visual.guide import Positions, load_estimator_net
+
+        net, m = load_estimator_net(cfg, str(store.manifest["vae"]["digest"]), latent_dim)
+        frames, est_digest = PlanFrames(Positions(net), latent_dim, True), str(m["digest"])
+    return VisualLatentDataset(store.path, store.manifest, np.ascontiguousarray(frames.of_latents(train["mu"])),
+                               np.ascontiguousarray(frames.of_latents(val["mu"])), xy.mean(0), xy.std(0),
+                               est_digest)
 
 
 __all__ = ["VisualLatentDataset", "make_visual_dataset", "load_visual_dataset", "LATENT_KEY"]

@@ -13,6 +13,10 @@ goal alike). Its position scale is the mean / std of the train positions, which 
 the scale the point maze's guidance uses (normalised x, y). The value rule on estimated positions
 is our reading: the paper does not state the visual value rule.
 
+With ``visual.plan_xy`` the planner's frames carry the estimator's (x, y) beside the latent
+(``visual/frames_xy.py``): guidance and value then read those two numbers of the plan
+(:class:`XYReadout`), not the estimator of its latents.
+
 Which estimator: ``checkpoints/<env>-estimator``, checked against the VAE whose latents the
 planner was trained on (its manifest's ``latents.vae_digest``): a mismatch is one CheckpointError.
 """
@@ -49,6 +53,24 @@ class EstimatorGuide(nn.Module):
         return (xy - self.xy_mean) / self.xy_std
 
 
+class XYReadout(nn.Module):
+    """Normalised [z, x, y] frames [..., D + 2] -> normalised positions [..., 2]: the frames' own (x, y)."""
+
+    def __init__(self, latent_dim: int, f_mean: np.ndarray, f_std: np.ndarray, xy_mean: np.ndarray,
+                 xy_std: np.ndarray):
+        super().__init__()
+        self.latent_dim = int(latent_dim)
+        self.in_dim = self.latent_dim + 2  # numbers per frame (the sampler's guidance reads frames of this size)
+        sl = slice(self.latent_dim, self.latent_dim + 2)
+        for name, a in (("f_mean", np.asarray(f_mean)[sl]), ("f_std", np.asarray(f_std)[sl]), ("xy_mean", xy_mean),
+                        ("xy_std", xy_std)):
+            self.register_buffer(name, torch.as_tensor(np.asarray(a, np.float64), dtype=torch.float32))
+
+    def forward(self, f_n: torch.Tensor) -> torch.Tensor:
+        xy = f_n[..., self.latent_dim:self.latent_dim + 2] * self.f_std + self.f_mean
+        return (xy - self.xy_mean) / self.xy_std
+
+
 def latent_provenance(manifest: dict[str, Any], where: str | Path) -> dict[str, Any]:
     """The ``latents`` field of a planner manifest (which VAE's latents it models); else one CheckpointError."""
     prov = manifest.get(LATENT_KEY)
@@ -68,11 +90,13 @@ def load_estimator_net(cfg: Config, vae_digest: str, latent_dim: int) -> tuple[L
     return net.requires_grad_(False), m
 
 
-def guide_map(cfg: Config, manifest: dict[str, Any]) -> EstimatorGuide:
+def guide_map(cfg: Config, manifest: dict[str, Any]) -> nn.Module:
     """The guidance map of a visual planner checkpoint (``hooks.guide_map_for`` asks for it)."""
     prov = latent_provenance(manifest, cfg.checkpoint_dir())
-    net, _ = load_estimator_net(cfg, prov["vae_digest"], int(prov["latent_dim"]))
     norm = manifest["normaliser"]
+    if prov.get("plan_xy"):
+        return XYReadout(int(prov["latent_dim"]), norm["mean"], norm["std"], prov["xy_mean"], prov["xy_std"])
+    net, _ = load_estimator_net(cfg, prov["vae_digest"], int(prov["latent_dim"]))
     return EstimatorGuide(net, norm["mean"], norm["std"], prov["xy_mean"], prov["xy_std"])
 
 

@@ -42,8 +42,8 @@ class TaskSearch:
 
     task: int
     plans: np.ndarray  # [N, F, D] every expanded node's simulated plan, model latents
-    z: np.ndarray  # [D] start latent (the VAE's mu of the start frame)
-    zg: np.ndarray  # [D] goal latent
+    z: np.ndarray  # [D] start frame (the VAE's mu of the start image; visual.plan_xy: with its estimated x, y)
+    zg: np.ndarray  # [D] goal frame
     status: str
     stop_reason: str
     expansions: int
@@ -72,19 +72,20 @@ def visual_planner(cfg: Config) -> tuple[Any, Any, dict[str, Any], Any]:
     return planner, hooks_for(cfg.env.name).episodes(cfg), manifest, norm
 
 
-def task_latents(episodes: Any, task: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
-    """(start, goal) latents of ``task``: the env reset, its start and goal frames encoded as an episode
-    encodes them."""
-    env = episodes.env
+def task_frames(episodes: Any, task: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """(start, goal) planner frames of ``task``: the env reset, its start and goal images encoded as an episode
+    encodes them (latents, or with visual.plan_xy latents and their estimated x, y)."""
+    env, f = episodes.env, episodes.frames
     env.reset(task, seed)
-    return episodes.vae.encode(env.image()[None])[0], episodes.vae.encode(env.goal_image()[None])[0]
+    return (f.of_latents(episodes.vae.encode(env.image()[None])[0]),
+            f.of_latents(episodes.vae.encode(env.goal_image()[None])[0]))
 
 
 def search_task(cfg: Config, planner: Any, episodes: Any, task: int, seed: int = 0) -> TaskSearch:
     """One plan call from ``task``'s start frame to its goal frame, encoded as an episode encodes them."""
     from fmctd_dist.planners.base import plan_seed
 
-    z, zg = task_latents(episodes, task, seed)
+    z, zg = task_frames(episodes, task, seed)
     out = planner.plan(z, zg, plan_seed(cfg.seed, task, seed, 0))
     r = planner.last_result
     return TaskSearch(task, r.tree.sim_plan[1:r.expansions + 1], z, zg, out.status, r.stop_reason,
