@@ -606,7 +606,8 @@ def validate(cfg: Config) -> None:
     check_env_fields(cfg.env)
     if cfg.visual.plan_xy and family(cfg.env.name) != "visual-pointmaze":
         raise ConfigError(f"visual.plan_xy=true adds the position estimator's (x, y) to a visual maze's latent "
-                          f"frames; env.name={cfg.env.name} ({family(cfg.env.name)}) has no latents. Drop visual.plan_xy")
+                          f"frames; env.name={cfg.env.name} ({family(cfg.env.name)}) has no latents. "
+                          "Drop visual.plan_xy")
     if cfg.method.wall_test and family(cfg.env.name) not in MAZE_FAMILIES:
         raise ConfigError(f"method.wall_test=true needs a point or ant maze (the walls come from its cells); "
                           f"env.name={cfg.env.name} ({family(cfg.env.name)}) has none. Drop method.wall_test")

@@ -150,7 +150,8 @@ def test_a_widened_model_plans_an_episode_and_configs_must_match_it(tmp_path):
                       method="fast-mctd")
     hooks.check_episodes(cfg)
     with torch_threads(1):
-        planner = make_planner(cfg, LocalDenoiser.from_checkpoint(out, cfg), normaliser_from_manifest(read_manifest(out)))
+        norm = normaliser_from_manifest(read_manifest(out))
+        planner = make_planner(cfg, LocalDenoiser.from_checkpoint(out, cfg), norm)
         episodes = hooks.episodes(cfg)
         first = []
         inner = planner.plan

@@ -39,7 +39,8 @@ VISUAL_FAMILY = "visual-pointmaze"
 
 @dataclass
 class VisualLatentDataset:
-    """mu [E, S, D] (visual.plan_xy: [mu, estimated x, y], D + 2) per split, the surface ``data/windows.py`` reads (train, val, normaliser, digest)."""
+    """mu [E, S, D] per split (visual.plan_xy: [mu, estimated x, y], D + 2), the surface ``data/windows.py``
+    reads (train, val, normaliser, digest)."""
 
     path: Path
     manifest: dict[str, Any]  # the latent store's manifest

@@ -51,7 +51,8 @@ class TaskSearch:
 
 
 def probe_config(argv: list[str]) -> Config:
-    """The latent-plan probes' config: unguided Diffusion Forcing at jump 5 on visual medium unless ``argv`` says otherwise."""
+    """The latent-plan probes' config: unguided Diffusion Forcing at jump 5 on visual medium unless ``argv``
+    says otherwise."""
     from fmctd_dist.config import load_config
 
     given = {w.split("=", 1)[0] for w in argv}
