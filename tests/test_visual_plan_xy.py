@@ -161,3 +161,24 @@ def test_a_widened_model_plans_an_episode_and_configs_must_match_it(tmp_path):
     assert s.shape == g.shape == (10,)
     np.testing.assert_allclose(s[8:], episodes.frames.estimator(s[:8]), rtol=1e-5)  # the start's own position
     assert row["plans"] >= 1 and np.isfinite(row["plan_xy"]).all() and row["env_steps"] <= cfg.env.max_steps
+
+
+XY = REPO_ROOT / "checkpoints" / f"{MEDIUM}-h5-xy"
+
+
+@pytest.mark.skipif(not (XY / "model.pt").exists(), reason=f"{XY} is not shipped")
+def test_fast_mctd_with_the_shipped_xy_model_solves_task3_seed0():
+    """The shipped [z, x, y] model (session 31, docs/results.md 13.4) at the maze's own warp rule: Fast-MCTD
+    solves task 3 seed 0 from images (the latent default returns "stay" there). Task 1 seed 0, the issue's
+    smoke test, it does not solve (it solves task 1 seeds 1, 5 and 6)."""
+    from fmctd_dist.denoiser.local import LocalDenoiser
+    from fmctd_dist.diffusion.checkpoint import normaliser_from_manifest, read_manifest
+    from fmctd_dist.hooks import hooks_for
+    from fmctd_dist.planners import make_planner
+
+    cfg = load_config([f"env={MEDIUM}", "method=fast-mctd", "visual.episodes=100", "visual.plan_xy=true",
+                       f"checkpoint={XY}"])
+    with torch_threads(1):
+        planner = make_planner(cfg, LocalDenoiser.from_checkpoint(XY, cfg), normaliser_from_manifest(read_manifest(XY)))
+        row = hooks_for(MEDIUM).episodes(cfg).run(planner, 3, 0)
+    assert row["success"] and row["plan_status"] == "early_stop", (row["plan_status"], row["env_steps"])
