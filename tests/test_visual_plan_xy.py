@@ -182,3 +182,21 @@ def test_fast_mctd_with_the_shipped_xy_model_solves_task3_seed0():
         planner = make_planner(cfg, LocalDenoiser.from_checkpoint(XY, cfg), normaliser_from_manifest(read_manifest(XY)))
         row = hooks_for(MEDIUM).episodes(cfg).run(planner, 3, 0)
     assert row["success"] and row["plan_status"] == "early_stop", (row["plan_status"], row["env_steps"])
+
+
+@pytest.mark.skipif(not (XY / "model.pt").exists(), reason=f"{XY} is not shipped")
+def test_an_xy_model_of_another_estimator_is_one_clear_error(tmp_path):
+    """A [z, x, y] planner whose frames carry another estimator's (x, y) than the one loaded: refused by name."""
+    import shutil
+
+    from fmctd_dist.hooks import hooks_for
+
+    other = tmp_path / "xy-other"
+    shutil.copytree(XY, other)
+    m = json.loads((other / "manifest.json").read_text())
+    m["latents"]["estimator_digest"] = "0123456789abcdef"
+    (other / "manifest.json").write_text(json.dumps(m))
+    cfg = load_config([f"env={MEDIUM}", "jump=5", "visual.episodes=100", "visual.plan_xy=true", f"checkpoint={other}"])
+    with pytest.raises(CheckpointError, match=r"estimator '0123456789abcdef'.*has digest.*retrain the planner with "
+                                              r"visual.plan_xy=true on this estimator"):
+        hooks_for(MEDIUM).check_episodes(cfg)
