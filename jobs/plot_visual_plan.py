@@ -56,7 +56,7 @@ def main(argv: list[str]) -> int:
     row = episodes.run(planner, task, seed)
     plan_z = np.asarray(planner.first)  # [F_env, D], one planner frame per env step
     traj = np.asarray(row["traj_xy"]).reshape(-1, 2)
-    est = episodes.positions(plan_z)
+    est = episodes.frames(plan_z)
     steps = np.linspace(0, len(plan_z) - 1, SHOWN + 2).round().astype(int)[1:-1]
     decoded = episodes.vae.decode(episodes.frames.latents(plan_z[steps]))
     real_at = np.minimum(steps + 1, len(traj) - 1)  # the robot's position after that many steps

@@ -37,7 +37,7 @@ def main(argv: list[str]) -> int:
     cfg = probe_config(argv)
     set_threads(cfg.eval.threads or 1)
     planner, episodes, manifest, norm = visual_planner(cfg)
-    pos, jump = episodes.positions, cfg.jump
+    pos, jump = episodes.frames, cfg.jump
     val = load_visual_dataset(cfg).val  # [E, S, D] the held-out episodes' planner frames
     span = cfg.env.horizon - jump
     rng = np.random.default_rng(0)

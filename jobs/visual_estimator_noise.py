@@ -80,7 +80,7 @@ def main(argv: list[str]) -> int:
     t0 = time.time()
     planner, episodes, _, _ = visual_planner(cfg)
     searches = [search_task(cfg, planner, episodes, task) for task in cfg.eval.tasks]
-    shipped = episodes.positions
+    shipped = episodes.frames
     print(f"searched in {time.time() - t0:.0f}s; plans per task {[len(s.plans) for s in searches]}", flush=True)
     print("| estimator | val RMSE | real 5-step move p99 / max | warping plans per task | median largest step "
           "| median first step |\n|---|---|---|---|---|---|")

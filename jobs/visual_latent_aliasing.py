@@ -72,7 +72,7 @@ def largest_steps(cfg, ds, train_xy: np.ndarray) -> list[str]:
     from fmctd_dist.visual.plan_quality import visual_planner
 
     planner, episodes, manifest, norm = visual_planner(cfg)
-    positions = episodes.positions
+    positions = episodes.frames
     flat = ds.train.reshape(-1, ds.train.shape[-1])
     pick = pool_index(len(flat))
     pool, pool_xy = norm.normalise(flat[pick]), train_xy.reshape(-1, 2)[pick]
@@ -98,15 +98,18 @@ def largest_steps(cfg, ds, train_xy: np.ndarray) -> list[str]:
 
 def main(argv: list[str]) -> int:
     from fmctd_dist.data.visual_dataset import load_visual_dataset
-    from fmctd_dist.visual.guide import Positions, load_estimator_net
+    from fmctd_dist.visual.guide import load_positions
 
     cfg = probe_config(argv)
     set_threads(cfg.eval.threads or 1)
     ds = load_visual_dataset(cfg)
-    net, _ = load_estimator_net(cfg, str(ds.manifest["vae"]["digest"]), int(ds.manifest["latent_dim"]))
-    latents = ds.train[..., :int(ds.manifest["latent_dim"])]  # visual.plan_xy frames: the latent part
-    xy = Positions(net)(latents)
-    norm, dim = ds.normaliser, latents.shape[-1]
+    dim = int(ds.manifest["latent_dim"])
+    latents = ds.train[..., :dim]  # visual.plan_xy frames: the latent part
+    if ds.plan_xy:  # the frames carry the estimator's (x, y) already
+        xy = ds.train[..., dim:dim + 2].astype(np.float64)
+    else:
+        xy = load_positions(cfg, str(ds.manifest["vae"]["digest"]), dim)[0](latents)
+    norm = ds.normaliser
     r = aliasing(latents, xy, lambda z: (z - norm.mean[:dim]) / norm.std[:dim], far=5.0)
     print(f"{ds.path}: {ds.train.shape[0]} train episodes; latent distances in normalised units (the planner's)")
     print("| consecutive step: median / p99 | nearest latent >= 5 units away: median / p10 | "

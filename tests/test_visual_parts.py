@@ -200,3 +200,46 @@ def test_train_visual_job_names_the_missing_frames(tmp_path):
     assert out.returncode == 2, out.stderr
     assert out.stderr.startswith("error: ")
     assert "jobs/render_frames.py env=visual-pointmaze-medium" in out.stderr
+
+
+def test_episodes_skip_what_another_process_rendered(tiny_dataset, tmp_path, monkeypatch):
+    """Two processes may share `part=episodes` (one from each end of the list): an episode whose file
+    appears while this one renders is kept as it is, not rendered again, and still enters the digest."""
+    from fmctd_dist.data.dataset import dataset_dir
+    from fmctd_dist.data.npz import load_npz, save_npz
+    from fmctd_dist.data.visual_frames import point_config
+    from fmctd_dist.visual import episodes as ep
+
+    data_cfg, path = tiny_dataset
+    (tmp_path / path.name).symlink_to(path)  # the point dataset, under this test's own data root
+    cfg, pcfg = _load(tmp_path, tmp_path / "parts", "episodes")
+    assert dataset_dir(point_config(cfg)) == tmp_path / path.name
+    out = ep.episodes_dir(cfg, pcfg)
+    ids = {"train": ep.episode_subset(cfg), "val": ep.val_episode_subset(cfg, 1, 1)}
+    other = out / ep._file("val", int(ids["val"][0]))
+    steps, calls = data_cfg.data.episode_steps, []
+
+    class OtherProcessRenders:
+        """Renders grey frames; on its first call 'another process' finishes the val episode."""
+
+        def __init__(self, *args, **kwargs):
+            pass
+
+        def render(self, xy):
+            if not other.exists():
+                save_npz(other, {"images": np.full((steps, 64, 64, 3), 7, np.uint8),
+                                 "xy": np.zeros((steps, 2), np.float32), "actions": np.zeros((steps, 2), np.float32)})
+            calls.append(len(xy))
+            return np.zeros((len(xy), 64, 64, 3), np.uint8)
+
+        def close(self):
+            pass
+
+    monkeypatch.setattr(ep, "FrameRenderer", OtherProcessRenders)
+    monkeypatch.setattr(ep, "render_info", lambda r: {"renderer": "test"})
+    _, m = ep.make_episodes(cfg, pcfg, progress=False)
+    assert sum(calls) == steps and m["generation"]["rendered_frames"] == steps  # the train episode only
+    shape = {"images": (np.uint8, (steps, 64, 64, 3))}
+    assert (load_npz(other, shape, "")["images"] == 7).all()  # the other process's file, untouched
+    assert not list(out.glob("*.tmp"))
+    assert m["episodes"] == ids["train"].tolist() and m["val_episodes"] == ids["val"].tolist()

@@ -21,6 +21,7 @@ digest then adds the estimator's, and the provenance says ``plan_xy``.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
@@ -59,8 +60,9 @@ class VisualLatentDataset:
         sha = str(self.manifest["sha256"])
         return f"{sha}+xy{self.estimator_digest}" if self.plan_xy else sha
 
-    @property
+    @cached_property
     def normaliser(self) -> Normaliser:
+        """Per-dimension mean and std of the train frames (computed once: the store is read-only here)."""
         flat = self.train.reshape(-1, self.train.shape[-1]).astype(np.float64)
         return Normaliser(flat.mean(0), flat.std(0))
 
@@ -124,15 +126,15 @@ def load_visual_dataset(cfg: Config) -> VisualLatentDataset:
         raise DatasetError(f"{store.path} holds no validation episodes; rerun `python jobs/train_visual.py "
                            f"part=latents env={cfg.env.name} latents.val_episodes=5`")
     xy = train["xy"].reshape(-1, 2).astype(np.float64)
-    frames, est_digest = PlanFrames(lambda z: z, latent_dim, False), None
-    if cfg.visual.plan_xy:
-        from fmctd_dist.visual.guide import Positions, load_estimator_net
+    train_frames, val_frames, est_digest = train["mu"], val["mu"], None
+    if cfg.visual.plan_xy:  # [z, estimator(z)] frames
+        from fmctd_dist.visual.guide import load_positions
 
-        net, m = load_estimator_net(cfg, str(store.manifest["vae"]["digest"]), latent_dim)
-        frames, est_digest = PlanFrames(Positions(net), latent_dim, True), str(m["digest"])
-    return VisualLatentDataset(store.path, store.manifest, np.ascontiguousarray(frames.of_latents(train["mu"])),
-                               np.ascontiguousarray(frames.of_latents(val["mu"])), xy.mean(0), xy.std(0),
-                               est_digest)
+        positions, est_digest = load_positions(cfg, str(store.manifest["vae"]["digest"]), latent_dim)
+        frames = PlanFrames(positions, latent_dim, True)
+        train_frames, val_frames = frames.of_latents(train_frames), frames.of_latents(val_frames)
+    return VisualLatentDataset(store.path, store.manifest, np.ascontiguousarray(train_frames, np.float32),
+                               np.ascontiguousarray(val_frames, np.float32), xy.mean(0), xy.std(0), est_digest)
 
 
 __all__ = ["VisualLatentDataset", "make_visual_dataset", "load_visual_dataset", "LATENT_KEY"]

@@ -346,14 +346,15 @@ def check_compatible(manifest: dict[str, Any], cfg: Config, where: str | Path) -
     )
 
 
-def verify_checkpoint(ckpt_dir: str | Path, cfg: Config) -> dict[str, Any]:
+def verify_checkpoint(ckpt_dir: str | Path, cfg: Config, manifest: dict[str, Any] | None = None) -> dict[str, Any]:
     """Everything a load of cfg's model from ckpt_dir checks short of unpickling it -> the manifest.
 
     Present and complete, manifest well-typed, trained for cfg (env, jump, model, n_tokens),
-    model.pt's sha256 the manifest's. Jobs call this before any actor starts.
+    model.pt's sha256 the manifest's. Jobs call this before any actor starts. ``manifest``: the
+    one :func:`read_manifest` gave for this dir, when the caller has read it already.
     """
     ckpt_dir = Path(ckpt_dir)
-    manifest = read_manifest(ckpt_dir, cfg)
+    manifest = read_manifest(ckpt_dir, cfg) if manifest is None else manifest
     check_compatible(manifest, cfg, ckpt_dir)
     _verified_sha(ckpt_dir, manifest, f"checkpoint {ckpt_dir}", _train_fix(cfg, ckpt_dir, broken=True))
     return manifest

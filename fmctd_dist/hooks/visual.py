@@ -49,13 +49,14 @@ def check_parts(cfg: Config) -> VisualParts:
     from fmctd_dist.visual.guide import latent_provenance
 
     ckpt = cfg.checkpoint_dir()
-    saved = read_manifest(ckpt, cfg).get(LATENT_KEY)
+    manifest = read_manifest(ckpt, cfg)
+    saved = manifest.get(LATENT_KEY)
     if isinstance(saved, dict) and bool(saved.get("plan_xy")) != cfg.visual.plan_xy:  # before the shape checks
         was = "[z, x, y] frames (visual.plan_xy=true)" if saved.get("plan_xy") else "latent frames"
         raise CheckpointError(f"checkpoint {ckpt} plans {was} but the config has visual.plan_xy="
                               f"{str(cfg.visual.plan_xy).lower()}; set visual.plan_xy="
                               f"{str(bool(saved.get('plan_xy'))).lower()} or pick a checkpoint trained for this one")
-    planner = verify_checkpoint(ckpt, cfg)  # env, jump, model, n_tokens: a maze model stops here (env.name)
+    planner = verify_checkpoint(ckpt, cfg, manifest)  # env, jump, model, n_tokens: a maze model stops here (env.name)
     prov = latent_provenance(planner, ckpt)
     vae_dir = part_dir(cfg, "", "vae")
     vae = read_part_manifest(vae_dir, "vae", cfg.env.name)
@@ -80,16 +81,18 @@ def check_parts(cfg: Config) -> VisualParts:
     return VisualParts(planner, vae, heads["estimator"], heads["invdyn"])
 
 
-def plan_frames(cfg: Config):
-    """Latents <-> the checkpoint's planner frames, and their world (x, y) (``visual/frames_xy.py``)."""
+def plan_frames(cfg: Config, manifest: dict[str, Any] | None = None):
+    """Latents <-> the checkpoint's planner frames, and their world (x, y) (``visual/frames_xy.py``).
+
+    ``manifest``: the planner's, when the caller has read (and checked) it already."""
     from fmctd_dist.diffusion.checkpoint import read_manifest
     from fmctd_dist.visual.frames_xy import PlanFrames
-    from fmctd_dist.visual.guide import Positions, latent_provenance, load_estimator_net
+    from fmctd_dist.visual.guide import latent_provenance, load_positions
 
-    manifest = read_manifest(cfg.checkpoint_dir(), cfg)
+    manifest = read_manifest(cfg.checkpoint_dir(), cfg) if manifest is None else manifest
     prov = latent_provenance(manifest, cfg.checkpoint_dir())
-    net, _ = load_estimator_net(cfg, prov["vae_digest"], int(prov["latent_dim"]))
-    return PlanFrames(Positions(net), int(prov["latent_dim"]), bool(prov.get("plan_xy")))
+    positions, _ = load_positions(cfg, prov["vae_digest"], int(prov["latent_dim"]))
+    return PlanFrames(positions, int(prov["latent_dim"]), bool(prov.get("plan_xy")))
 
 
 def plan_rules(cfg: Config) -> MazeRules:
@@ -122,8 +125,7 @@ class VisualEpisodes:
         parts = check_parts(cfg)
         self.vae = load_vae(part_dir(cfg, "", "vae"), cfg.env.name, state_dim(cfg.env.name))
         self.invdyn = load_invdyn(part_dir(cfg, "", "invdyn"), cfg.env.name, self.vae)
-        self.frames = plan_frames(cfg)
-        self.positions = self.frames  # planner frames -> world (x, y)
+        self.frames = plan_frames(cfg, parts.planner)  # latents <-> planner frames -> world (x, y)
         self.policy_digest = str(parts.invdyn["digest"])
         self.env = VisualPointMaze(cfg.env.name, cfg.env.protocol, shadowsize=cfg.visual.shadowsize)
 

@@ -90,6 +90,12 @@ def load_estimator_net(cfg: Config, vae_digest: str, latent_dim: int) -> tuple[L
     return net.requires_grad_(False), m
 
 
+def load_positions(cfg: Config, vae_digest: str, latent_dim: int) -> tuple[Positions, str]:
+    """The estimator as a numpy (x, y) reader, and its digest: what planner frames and the value read."""
+    net, m = load_estimator_net(cfg, vae_digest, latent_dim)
+    return Positions(net), str(m["digest"])
+
+
 def guide_map(cfg: Config, manifest: dict[str, Any]) -> nn.Module:
     """The guidance map of a visual planner checkpoint (``hooks.guide_map_for`` asks for it)."""
     prov = latent_provenance(manifest, cfg.checkpoint_dir())

@@ -106,7 +106,7 @@ def plan_quality(cfg: Config, tasks: list[int], seed: int = 0) -> dict[str, Any]
     from fmctd_dist.hooks import warp_threshold
 
     planner, episodes, manifest, norm = visual_planner(cfg)
-    env, pos = episodes.env, episodes.positions
+    env, pos = episodes.env, episodes.frames
     ds = load_visual_dataset(cfg)
     ref = norm.normalise(ds.train.reshape(-1, ds.train.shape[-1])[::NN_STRIDE])
     real = ds.val[:, ::NN_STRIDE]  # [E, S/5, D], 5 env steps apart like a jump-5 plan
