@@ -422,8 +422,11 @@ class Config:
 
     @property
     def run_name(self) -> str:
-        """<env>-h<jump> (Diffusion Forcing models) or <env>-diffuser: default checkpoint/run dir name."""
-        return f"{self.env.name}-diffuser" if self.model.kind == "diffuser" else f"{self.env.name}-h{self.jump}"
+        """<env>-h<jump> (Diffusion Forcing models; <env>-h<jump>-xy with visual.plan_xy) or <env>-diffuser:
+        the default checkpoint / run dir name, so each planner variant is one config word away."""
+        if self.model.kind == "diffuser":
+            return f"{self.env.name}-diffuser"
+        return f"{self.env.name}-h{self.jump}" + ("-xy" if self.visual.plan_xy else "")
 
     def checkpoint_dir(self) -> Path:
         return resolve_path(self.checkpoint or f"checkpoints/{self.run_name}")

@@ -52,9 +52,12 @@ def _fake_xy_dataset(episodes: int = 2, steps: int = 1001):
 
 
 def test_plan_xy_adds_two_numbers_per_frame_and_only_on_visual_mazes():
-    assert load_config([f"env={MEDIUM}", "jump=5"]).frame_dim == 8
+    latent = load_config([f"env={MEDIUM}", "jump=5"])
+    assert latent.frame_dim == 8 and latent.checkpoint_dir() == SHIPPED
     cfg = load_config([f"env={MEDIUM}", "jump=5", "visual.plan_xy=true"])
     assert cfg.frame_dim == 10 and cfg.token_dim == 100
+    assert cfg.checkpoint_dir() == REPO_ROOT / "checkpoints" / f"{MEDIUM}-h5-xy"  # the variant's own default
+    assert load_config([f"env={MEDIUM}", "jump=1", "visual.plan_xy=true"]).run_name == f"{MEDIUM}-h1-xy"
     with pytest.raises(ConfigError, match=r"visual.plan_xy=true.*pointmaze-medium.*Drop visual.plan_xy"):
         load_config(["env=pointmaze-medium", "visual.plan_xy=true"])
 
