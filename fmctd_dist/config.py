@@ -219,6 +219,10 @@ class DiffusionConfig:
     # estimate; network: through the network branch only, model.param's skip path held constant
     # (the same as input for model.param=x0, which has none)
     guidance_path: str = spec("input", choices=GUIDANCE_PATHS)
+    # Boundary-continuity guidance (our lever, 0 = the authors' reward): guided jobs also pull each
+    # token boundary's step toward the step before it (sampler.goal_reward), against the jumps at
+    # token boundaries our models make (docs/results.md §4)
+    boundary_guidance: float = spec(0.0, ge=0, why="weight of the boundary term in the guidance reward; 0 = off")
     # How denoisers run the network (issue 22): fp32 (reference) | bf16 (weights stored bf16, autocast);
     # compile: torch.compile with one graph per micro-batch shape. Off until measured (docs/results.md 6).
     precision: str = spec("fp32", choices=PRECISIONS)

@@ -3,6 +3,7 @@
     python jobs/bench_denoiser.py                                  # every shipped checkpoint
     python jobs/bench_denoiser.py checkpoints/pointmaze-medium-h5  # one
     python jobs/bench_denoiser.py samples=100 A B                  # 100 plans per task start (default 20)
+    python jobs/bench_denoiser.py diffusion.boundary_guidance=8 A  # dotted key=value: every config's override
     python jobs/bench_denoiser.py --throughput options=fp32,bf16,compiled,bf16+compiled   # speed per option
     python jobs/bench_denoiser.py --precision checkpoints/pointmaze-medium-h1   # why plans warp
     python jobs/bench_denoiser.py --cube checkpoints/cube-single-h5   # cube models (also in the default list)
@@ -58,9 +59,10 @@ def precision_lines(ckpt: Path, batch: int = 64, timesteps: tuple[int, ...] = ()
 OPTIONS = {n: option_settings(n) for n in ("fp32", "bf16", "compiled", "bf16+compiled")}
 
 
-def cube_config(ckpt: Path, overrides: list[str]) -> Config | None:
+def checkpoint_config(ckpt: Path, overrides: list[str]) -> Config | None:
     """The checkpoint's own config with dotted ``key=value`` overrides (e.g. ``data.episodes=300``, so models
-    trained on different data sizes are measured on one validation split); None when there are none."""
+    trained on different data sizes are measured on one validation split, or a sampling lever such as
+    ``diffusion.boundary_guidance=8``); None when there are none."""
     if not overrides:
         return None
     from omegaconf import OmegaConf
@@ -82,7 +84,7 @@ def cube_lines(ckpts: list[Path], overrides: list[str] = ()) -> list[str]:
              "at most one cube moved | some cube moved | boundary / inside step | largest step |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for ckpt in ckpts:
-        r = cube_plan_quality(ckpt, cube_config(ckpt, list(overrides)))
+        r = cube_plan_quality(ckpt, checkpoint_config(ckpt, list(overrides)))
         for who in ("model", "data"):
             q = r[who]
             lines.append(f"| {r['checkpoint']} | {r['steps']} | {r['val_loss']:.4f} | {r['train_h']:.2f} | "
@@ -251,10 +253,11 @@ def main(argv: list[str]) -> None:
         print("\n".join(cube_lines([Path(a) for a in argv[1:] if "=" not in a], words)))
         return
     # every shipped planning model (DF or Diffuser); other checkpoints (the ant expert) have no model_kind
-    words = dict(a.split("=", 1) for a in argv if "=" in a)  # samples=N: plans per task start (default 20)
+    words = dict(a.split("=", 1) for a in argv if "=" in a and "." not in a.split("=", 1)[0])
+    overrides = [a for a in argv if "=" in a and "." in a.split("=", 1)[0]]  # dotted: every checkpoint's config
     if set(words) - {"samples"}:
         raise SystemExit(f"bench_denoiser: unknown {sorted(set(words) - {'samples'})}; "
-                         f"the quality mode takes samples=N")
+                         f"the quality mode takes samples=N and dotted config overrides (diffusion.boundary_guidance=8)")
     per_task = int(words.get("samples", SAMPLES_PER_TASK))
     ckpts = [Path(a) for a in argv if "=" not in a] or sorted(
         p.parent for p in (REPO_ROOT / "checkpoints").glob("*/manifest.json")
@@ -269,7 +272,7 @@ def main(argv: list[str]) -> None:
           "guided: no warp / in free cells / valid / within 2.0 of goal | guided boundary / inside step |")
     print("|---|---|---|---|---|---|---|---|")
     for ckpt in ckpts:
-        r = plan_quality(ckpt, samples_per_task=per_task)
+        r = plan_quality(ckpt, checkpoint_config(ckpt, overrides), samples_per_task=per_task)
         print(f"| {r['checkpoint']} | {r['steps']} | {r['params']:,} | "
               f"{r['val_loss'] if r['val_loss'] is None else round(r['val_loss'], 4)} | {r['train_h']:.2f} | "
               f"{100 * r['unguided_no_warp']:.0f}% / {100 * r['unguided_in_free']:.1f}% / "

@@ -358,12 +358,12 @@ def test_bench_denoiser_cube_overrides_apply_to_every_checkpoint():
     bench = load_job("bench_denoiser")
     ckpt = REPO_ROOT / "checkpoints" / "cube-triple-h5"
     own = config_from_dict(json.loads((ckpt / "manifest.json").read_text())["config"])
-    assert bench.cube_config(ckpt, []) is None
+    assert bench.checkpoint_config(ckpt, []) is None
     other = own.data.episodes + 100
-    cfg = bench.cube_config(ckpt, [f"data.episodes={other}"])
+    cfg = bench.checkpoint_config(ckpt, [f"data.episodes={other}"])
     assert cfg.data.episodes == other
     assert dataclasses.replace(cfg, data=own.data) == own  # nothing else changed
     with pytest.raises(ConfigError, match="data.episodes"):
-        bench.cube_config(ckpt, ["data.episodes=-1"])
+        bench.checkpoint_config(ckpt, ["data.episodes=-1"])
     with pytest.raises(SystemExit, match="no checkpoint \\(manifest.json\\) at no-such-dir"):
         bench.main(["--cube", "data.episodes=300", "no-such-dir"])

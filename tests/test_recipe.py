@@ -99,20 +99,20 @@ FD_STEP = 1e-6
 FD_RTOL = 1e-5  # float64 central differences: truncation ~1e-12, round-off ~1e-10
 
 
-def guidance_grad_from_transition(model, consts, x, a, b, scale, start, goal, path):
+def guidance_grad_from_transition(model, consts, x, a, b, scale, start, goal, path, boundary_weight=0.0):
     """The gradient the sampler added, read back from its guided and unguided x0 estimates.
 
     transition: eps_g = eps - s1b grad and x0_g = (x_in - s1a eps_g) / sa, so
     grad = (x0_g - x0) sa / (s1a s1b) on every token that moves (a > b).
     """
-    _, x0_g = transition(model, consts, x, a, b, scale, start, goal, path)
+    _, x0_g = transition(model, consts, x, a, b, scale, start, goal, path, boundary_weight=boundary_weight)
     _, x0_u = transition(model, consts, x, a, b, torch.zeros_like(scale), start, goal, path)
     sa, s1a, s1b = (getattr(consts, f)[lv].double()[..., None] for f, lv in
                     (("sqrt_ab_in", a), ("sqrt_1m_ab_in", a), ("sqrt_1m_ab_out", b)))
     return (x0_g - x0_u) * sa / (s1a * s1b)
 
 
-def finite_difference_grad(model, consts, x, a, scale, start, goal, path, tokens):
+def finite_difference_grad(model, consts, x, a, scale, start, goal, path, tokens, boundary_weight=0.0):
     """Central differences of 62.5 scale R(x0_hat(x_in)) w.r.t. the plan tokens of x_in.
 
     path=network holds the skip path at the unperturbed input (DFTransformer.skip).
@@ -126,7 +126,7 @@ def finite_difference_grad(model, consts, x, a, scale, start, goal, path, tokens
         x0 = model(z, t_in)
         if path == "network":
             x0 = x0 - model.skip(z, t_in) + frozen
-        return GUIDANCE_GAIN * scale * goal_reward(x0, start, goal)  # [B]
+        return GUIDANCE_GAIN * scale * goal_reward(x0, start, goal, boundary_weight=boundary_weight)  # [B]
 
     grad = torch.zeros_like(x)
     with torch.no_grad():
@@ -159,6 +159,41 @@ def test_guidance_gradient_matches_finite_differences(param, norm, path):
         other = "input" if path == "network" else "network"
         alt = guidance_grad_from_transition(model, consts, x, a, b, scale, start, goal, other)[:, 1:]
         assert not torch.allclose(alt, got)  # the two paths differ where there is a skip path
+
+
+@pytest.mark.parametrize("path", ["input", "network"])
+def test_boundary_guidance_gradient_matches_finite_differences(path):
+    """diffusion.boundary_guidance: the sampler's gradient of goal + boundary term is the finite difference's,
+    and the term changes it (v model: both guidance paths)."""
+    torch.manual_seed(0)
+    model = DFTransformer.from_config(ModelConfig(width=32, layers=2, heads=2, ff=64, param="v"),
+                                      n_tokens=4).double().eval().requires_grad_(False)
+    consts = make_consts(DiffusionConfig())
+    rng = np.random.default_rng(1)
+    x = torch.as_tensor(rng.standard_normal((2, 4, 20)))
+    start, goal = torch.as_tensor(rng.standard_normal((2, 2))), torch.as_tensor(rng.standard_normal((2, 2)))
+    a = torch.tensor([[0, 3, 12, 40], [0, 2, 25, 50]])
+    b = (a - 1).clamp(min=0)
+    scale = torch.tensor([1.0, 0.5], dtype=torch.float64)
+    got = guidance_grad_from_transition(model, consts, x, a, b, scale, start, goal, path, 2.0)[:, 1:]
+    want = finite_difference_grad(model, consts, x, a, scale, start, goal, path, range(1, 4), 2.0)[:, 1:]
+    torch.testing.assert_close(got, want, rtol=FD_RTOL, atol=FD_RTOL * float(want.abs().max()))
+    plain = guidance_grad_from_transition(model, consts, x, a, b, scale, start, goal, path)[:, 1:]
+    assert (got - plain).abs().max() > 1e-3 * float(want.abs().max())
+
+
+def test_boundary_term_is_zero_for_steady_motion_and_the_jump_for_a_jump():
+    from fmctd_dist.diffusion.sampler import boundary_kink
+
+    line = torch.arange(30, dtype=torch.float64)[None, :, None] * torch.tensor([0.3, -0.1], dtype=torch.float64)
+    assert float(boundary_kink(line, 10).abs().max()) < 1e-12  # steady motion: no kink at either boundary
+    jump = line.clone()
+    jump[:, 20:] += torch.tensor([3.0, 4.0], dtype=torch.float64)  # a 5-unit jump into token 2
+    assert float(boundary_kink(jump, 10)) == pytest.approx(5.0 / 2)  # mean over the 2 boundaries
+    x0 = torch.as_tensor(np.random.default_rng(0).standard_normal((3, 3, 20)))
+    start, goal = x0[:, 0, :2], x0[:, -1, -2:]
+    assert torch.equal(goal_reward(x0, start, goal), goal_reward(x0, start, goal, boundary_weight=0.0))
+    assert (goal_reward(x0, start, goal, boundary_weight=1.0) < goal_reward(x0, start, goal)).all()
 
 
 def test_a_v_checkpoint_plans_through_the_local_denoiser(tmp_path):

@@ -40,6 +40,7 @@ class LocalDenoiser:
         self.net = runtime_model(self.model, self.precision, self.compiled, warn)
         self.consts = make_consts(diffusion_cfg, self.device)
         self.guidance_path = diffusion_cfg.guidance_path  # through the whole x0 estimate, or its network branch
+        self.boundary_weight = float(diffusion_cfg.boundary_guidance)  # guided jobs' boundary-continuity term
         self.micro_batch = micro_batch
         self.digest = digest  # checkpoint digest ("" for an in-memory model)
         # the space guidance measures distances in (None: the frame state; the visual maze: estimated x, y)
@@ -99,6 +100,7 @@ class LocalDenoiser:
             self.compiled,
             None if mb.guide_mask is None else torch.as_tensor(mb.guide_mask, dtype=torch.float32, device=dev),
             self.guide_map,
+            self.boundary_weight,
         )
         x, x0 = x.cpu().numpy(), x0.cpu().numpy()  # waits for the device
         return x, x0, time.perf_counter() - t0

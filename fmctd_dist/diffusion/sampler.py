@@ -70,7 +70,8 @@ def make_consts(cfg: DiffusionConfig, device: torch.device | str = "cpu") -> Sam
 
 
 def goal_reward(x0: torch.Tensor, start: torch.Tensor, goal: torch.Tensor,
-                mask: torch.Tensor | None = None, guide_map: nn.Module | None = None) -> torch.Tensor:
+                mask: torch.Tensor | None = None, guide_map: nn.Module | None = None,
+                boundary_weight: float = 0.0) -> torch.Tensor:
     """R = -mean_f w_f tanh(||xy_f - target_f|| / 2) per job, in normalised space.
 
     x0: [B, T, D] tokens (token 0 = context), start/goal: [B, d] -> R: [B]. Tokens un-stack
@@ -86,6 +87,13 @@ def goal_reward(x0: torch.Tensor, start: torch.Tensor, goal: torch.Tensor,
     ``guide_map`` (a module with ``in_dim``: frame states [..., in_dim] -> [..., d']): distances
     are measured on mapped frames, start and goal, e.g. the visual maze's position estimator
     reading (x, y) off a latent (``visual/guide.py``); the gradient then flows through the map.
+
+    ``boundary_weight`` (diffusion.boundary_guidance; 0 = the authors' reward, bit for bit) adds
+    -w * mean over token boundaries of ||(p_first - p_last) - (p_last - p_before)||: the step across
+    each boundary (including context -> first plan token) should continue the step before it. Plans
+    of our models jump at token boundaries while each token is smooth inside (docs/results.md §4);
+    a second difference is zero for any steady motion, so the term does not pull the plan toward
+    standing still, only toward a boundary step that looks like the inside ones.
     """
     b, t, dim = x0.shape
     if guide_map is not None:
@@ -109,13 +117,25 @@ def goal_reward(x0: torch.Tensor, start: torch.Tensor, goal: torch.Tensor,
                           mask[:, None].expand(b, (t - 1) * fs, d)), dim=1).to(diff.dtype)
         diff = diff * keep
     dist = torch.linalg.vector_norm(diff, dim=-1)  # [B, F]
-    return -(w * torch.tanh(dist / 2)).mean(dim=1)
+    reward = -(w * torch.tanh(dist / 2)).mean(dim=1)
+    if boundary_weight and t > 1 and fs >= 2:
+        reward = reward - boundary_weight * boundary_kink(frames, fs)
+    return reward
+
+
+def boundary_kink(frames: torch.Tensor, fs: int) -> torch.Tensor:
+    """[B, F, d] frames in tokens of ``fs`` -> [B]: mean over token boundaries of the second difference's norm
+    (the step into each token's first frame minus the step before it)."""
+    first = torch.arange(fs, frames.shape[1], fs, device=frames.device)  # first frame of tokens 1..T-1
+    across = frames[:, first] - frames[:, first - 1]
+    before = frames[:, first - 1] - frames[:, first - 2]
+    return torch.linalg.vector_norm(across - before, dim=-1).mean(dim=1)
 
 
 def guided_estimate(model: nn.Module, x_in: torch.Tensor, t_in: torch.Tensor, scale: torch.Tensor,
                     start: torch.Tensor, goal: torch.Tensor, guidance_path: str = "input",
-                    guide_mask: torch.Tensor | None = None,
-                    guide_map: nn.Module | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+                    guide_mask: torch.Tensor | None = None, guide_map: nn.Module | None = None,
+                    boundary_weight: float = 0.0) -> tuple[torch.Tensor, torch.Tensor]:
     """(x0_hat, d objective / d x_in), both [B, T, D]: the network's estimate and the guidance gradient.
 
     Eager autograd, unless the model brings its own compiled step (``model.guided_estimate``,
@@ -124,25 +144,25 @@ def guided_estimate(model: nn.Module, x_in: torch.Tensor, t_in: torch.Tensor, sc
     """
     own = getattr(model, "guided_estimate", None)
     if own is not None:
-        return own(x_in, t_in, scale, start, goal, guidance_path, guide_mask, guide_map)
+        return own(x_in, t_in, scale, start, goal, guidance_path, guide_mask, guide_map, boundary_weight)
     with torch.enable_grad():
         xg = x_in.detach().requires_grad_(True)
         x0 = model(xg, t_in) if guidance_path == "input" else model(xg, t_in, skip_grad=False)
-        objective = GUIDANCE_GAIN * scale * goal_reward(x0, start, goal, guide_mask, guide_map)  # [B]
+        objective = GUIDANCE_GAIN * scale * goal_reward(x0, start, goal, guide_mask, guide_map, boundary_weight)
         (grad,) = torch.autograd.grad(objective.sum(), xg)
     return x0.detach(), grad
 
 
 def functional_guided_estimate(model: nn.Module, x_in: torch.Tensor, t_in: torch.Tensor, scale: torch.Tensor,
                                start: torch.Tensor, goal: torch.Tensor, guidance_path: str = "input",
-                               guide_mask: torch.Tensor | None = None,
-                               guide_map: nn.Module | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+                               guide_mask: torch.Tensor | None = None, guide_map: nn.Module | None = None,
+                               boundary_weight: float = 0.0) -> tuple[torch.Tensor, torch.Tensor]:
     """:func:`guided_estimate` written with ``torch.func.grad``, which torch.compile traces into one
     graph (``torch.autograd.grad`` would break it); the same numbers up to float rounding."""
 
     def objective(xx: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         x0 = model(xx, t_in) if guidance_path == "input" else model(xx, t_in, skip_grad=False)
-        return (GUIDANCE_GAIN * scale * goal_reward(x0, start, goal, guide_mask, guide_map)).sum(), x0
+        return (GUIDANCE_GAIN * scale * goal_reward(x0, start, goal, guide_mask, guide_map, boundary_weight)).sum(), x0
 
     grad, x0 = torch.func.grad(objective, has_aux=True)(x_in)
     return x0, grad
@@ -151,8 +171,8 @@ def functional_guided_estimate(model: nn.Module, x_in: torch.Tensor, t_in: torch
 def transition(model: nn.Module, c: SamplerConsts, x: torch.Tensor, a: torch.Tensor, b: torch.Tensor,
                scale: torch.Tensor, start: torch.Tensor, goal: torch.Tensor,
                guidance_path: str = "input", force_grad: bool = False,
-               guide_mask: torch.Tensor | None = None,
-               guide_map: nn.Module | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+               guide_mask: torch.Tensor | None = None, guide_map: nn.Module | None = None,
+               boundary_weight: float = 0.0) -> tuple[torch.Tensor, torch.Tensor]:
     """One DDIM step from levels a to b. x: [B, T, D]; a, b: [B, T] long; scale: [B];
     guide_mask: [B, d] or None (the dims the goal term uses, :func:`goal_reward`); guide_map: the
     space the guidance measures distances in (None: the frame state itself).
@@ -169,7 +189,8 @@ def transition(model: nn.Module, c: SamplerConsts, x: torch.Tensor, a: torch.Ten
     sb, s1b = c.sqrt_ab_out[b][..., None], c.sqrt_1m_ab_out[b][..., None]
     guided = scale != 0  # [B]
     if force_grad or bool(guided.any()):
-        x0, grad = guided_estimate(model, x_in, t_in, scale, start, goal, guidance_path, guide_mask, guide_map)
+        x0, grad = guided_estimate(model, x_in, t_in, scale, start, goal, guidance_path, guide_mask, guide_map,
+                                   boundary_weight)
     else:
         with torch.no_grad():
             x0 = model(x_in, t_in)
@@ -211,12 +232,12 @@ def run_levels(model: nn.Module, c: SamplerConsts, x: torch.Tensor, levels: torc
                start: torch.Tensor, goal: torch.Tensor, stats: dict | None = None,
                noise_seed: torch.Tensor | None = None, guidance_path: str = "input",
                force_grad: bool = False, guide_mask: torch.Tensor | None = None,
-               guide_map: nn.Module | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+               guide_map: nn.Module | None = None, boundary_weight: float = 0.0) -> tuple[torch.Tensor, torch.Tensor]:
     """Run levels [B, R+1, T] (row r -> r+1 per transition) on x [B, T, D].
 
     scale [B], start/goal [B, d], noise_seed [B] (needed only if some row goes up), guide_mask
     [B, d] or None (object-wise guidance: the dims the goal term uses), guide_map: see
-    :func:`goal_reward`. Returns
+    :func:`goal_reward`, boundary_weight: its boundary term (guided jobs only). Returns
     (x, x0): the final tokens and, per job, the x0 estimate of that job's last DDIM transition
     that moved a token (x itself if none did), so a job's result does not depend on which
     other jobs share its micro-batch. Rows where no token of any job goes down skip the model
@@ -237,7 +258,7 @@ def run_levels(model: nn.Module, c: SamplerConsts, x: torch.Tensor, levels: torc
         if not active:
             continue
         x, x0_r = transition(model, c, x, levels[:, r], levels[:, r + 1], scale, start, goal, guidance_path,
-                             force_grad, guide_mask, guide_map)
+                             force_grad, guide_mask, guide_map, boundary_weight)
         x0 = torch.where(down[:, r].any(dim=1)[:, None, None], x0_r, x0)
         calls += 1
     if stats is not None:
