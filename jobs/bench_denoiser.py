@@ -257,7 +257,8 @@ def main(argv: list[str]) -> None:
     overrides = [a for a in argv if "=" in a and "." in a.split("=", 1)[0]]  # dotted: every checkpoint's config
     if set(words) - {"samples"}:
         raise SystemExit(f"bench_denoiser: unknown {sorted(set(words) - {'samples'})}; "
-                         f"the quality mode takes samples=N and dotted config overrides (diffusion.boundary_guidance=8)")
+                         "the quality mode takes samples=N and dotted config overrides "
+                         "(e.g. diffusion.boundary_guidance=8)")
     per_task = int(words.get("samples", SAMPLES_PER_TASK))
     ckpts = [Path(a) for a in argv if "=" not in a] or sorted(
         p.parent for p in (REPO_ROOT / "checkpoints").glob("*/manifest.json")
