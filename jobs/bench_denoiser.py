@@ -253,8 +253,8 @@ def main(argv: list[str]) -> None:
         print("\n".join(cube_lines([Path(a) for a in argv[1:] if "=" not in a], words)))
         return
     # every shipped planning model (DF or Diffuser); other checkpoints (the ant expert) have no model_kind
-    words = dict(a.split("=", 1) for a in argv if "=" in a and "." not in a.split("=", 1)[0])
-    overrides = [a for a in argv if "=" in a and "." in a.split("=", 1)[0]]  # dotted: every checkpoint's config
+    overrides = [a for a in argv if "." in a.partition("=")[0] and "=" in a]  # dotted: every checkpoint's config
+    words = dict(a.split("=", 1) for a in argv if "=" in a and a not in overrides)
     if set(words) - {"samples"}:
         raise SystemExit(f"bench_denoiser: unknown {sorted(set(words) - {'samples'})}; "
                          "the quality mode takes samples=N and dotted config overrides "
