@@ -3,7 +3,8 @@
     python3 jobs/gpu_train.py OUT_DIR                           # the H200 device: --set campaign, ~8.5 min
     python3 jobs/gpu_train.py OUT_DIR --set scratch             # the three sparse models from scratch (paper recipe)
     python3 jobs/gpu_train.py OUT_DIR --set ant                 # the six AntMaze models from the dense ant ones
-    python3 jobs/gpu_train.py OUT_DIR --set visual              # the four visual latent models (carried stores)
+    python3 jobs/gpu_train.py OUT_DIR --set visual              # the four [z, x, y] visual planners (carried stores)
+    python3 jobs/gpu_train.py OUT_DIR --set ant,visual          # both sets at once (10 models, 7 tars)
     python3 jobs/gpu_train.py OUT_DIR --train-until-s 300 train.precision=bf16   # extra words go to every run
     python3 jobs/gpu_train.py OUT_DIR --dry-run                 # CPU: tiny data and model, seconds (tested)
 
@@ -28,11 +29,14 @@ is importable:
    from scratch with the paper's recipe; ``ant`` trains the six AntMaze models from the carried dense
    ones (checkpoints/antmaze-{medium,large,giant}-h1; carry checkpoints/ant-expert too: its actions make
    the ant data);
-   ``visual`` trains the visual maze's latent models on carried latent stores (no rendering there).
+   ``visual`` trains the visual maze's [z, x, y] planners (``visual-latent``: the latent ones) on
+   carried latent stores (no rendering there). Sets joined by commas train at once; the dataset
+   workers then get the cores the carried-data models leave.
 4. output: one OUT_DIR/<name>.tar per model (its model.pt + manifest.json, and the half-way
    snapshot's; < 16 MiB for the 6 x 128 model) and OUT_DIR/train_logs.txt with each run's last
-   lines and each dataset's sha256: at most 7 files, inside the device tool's 8. A run that
-   outlives the deadline by --grace-s is killed and its last checkpoint is packed.
+   lines and each dataset's sha256: at most 7 tars, inside the device tool's 8 files; with more
+   than 7 models (sets joined by commas) they share tars, OUT_DIR/models-<i>.tar, without snapshots.
+   A run that outlives the deadline by --grace-s is killed and its last checkpoint is packed.
 """
 
 from __future__ import annotations
@@ -90,6 +94,22 @@ def _visual(maze: str, jump: int) -> tuple[str, list[str]]:
                                                 f"train.init_from={VISUAL_START[maze]}", BW]
 
 
+# the [z, x, y] planners (visual.plan_xy; results 13.4, sessions 31-32) continue the shipped ones; the dense
+# large one, which does not exist yet, starts from the sparse large one (same width, only the jump differs)
+XY_START = {("medium", 5): "checkpoints/visual-pointmaze-medium-h5-xy",
+            ("medium", 1): "checkpoints/visual-pointmaze-medium-h1-xy",
+            ("large", 5): "checkpoints/visual-pointmaze-large-h5-xy",
+            ("large", 1): "checkpoints/visual-pointmaze-large-h5-xy"}
+XY_RECIPE = ["visual.plan_xy=true", BW, "train.boundary_space=position", "train.position_weight=3"]
+
+
+def _visual_xy(maze: str, jump: int) -> tuple[str, list[str]]:
+    """A [z, x, y] visual planner on the carried 100-episode latent store, with the recipe its lineage used."""
+    return f"visual-pointmaze-{maze}-h{jump}-xy", [f"env=visual-pointmaze-{maze}", f"jump={jump}",
+                                                   "visual.episodes=100", f"train.init_from={XY_START[maze, jump]}",
+                                                   *XY_RECIPE]
+
+
 SETS: dict[str, list[tuple[str, list[str]]]] = {
     # each shipped campaign model with the levers its manifest records (docs/results.md section 4)
     "campaign": [_campaign("medium", 5), _campaign("large", 5, BW), _campaign("giant", 5, BW),
@@ -100,7 +120,9 @@ SETS: dict[str, list[tuple[str, list[str]]]] = {
     "ant": [_ant(m, j) for j in (5, 1) for m in ("medium", "large", "giant")],
     # the four visual latent models; nothing is rendered there: carry each maze's VAE
     # (checkpoints/visual-pointmaze-<maze>-vae), its latent store and its VISUAL_START model
-    "visual": [_visual(m, j) for j in (5, 1) for m in ("medium", "large")],
+    "visual-latent": [_visual(m, j) for j in (5, 1) for m in ("medium", "large")],
+    # the four [z, x, y] visual planners: carry each maze's VAE, estimator, latent store and XY_START models
+    "visual": [_visual_xy(m, j) for j in (5, 1) for m in ("medium", "large")],
 }
 CARRIED_DATA = ("visual-",)  # env families whose data is carried (made on a CPU machine), never generated here
 DRY = ["data.episodes=8", "data.episode_steps=301", "env.horizon=100", "data.train_window=100", "env.max_steps=100",
@@ -194,28 +216,52 @@ def maze_chain(env_name: str, models: list[tuple[str, list[str]]], words: list[s
         log(f"{name}: {status[name]}")
 
 
-def pack(name: str, run: Path, out: Path) -> str:
-    """OUT/<name>.tar: the run's model.pt + manifest.json and its first snapshot's, within the file limit."""
-    if not (run / "model.pt").exists():
-        return f"{name}: no model.pt"
-    members = [run / "model.pt", run / "manifest.json"]
+MAX_TARS = 7  # the device returns 8 files: the tars and train_logs.txt
+TOTAL_LIMIT = 60 * 2**20  # of the 64 MiB it returns in all
+
+
+def pack_all(names: list[str], runs: Path, out: Path) -> list[str]:
+    """The runs' weights in at most MAX_TARS tars: OUT/<name>.tar each, with its first half-way snapshot, while
+    that fits the device's limits; more models share tars (OUT/models-<i>.tar) and leave their snapshots behind.
+    Every tar holds <name>/model.pt + manifest.json per model, so unpacking is the same either way."""
+    members = {n: [runs / n / "model.pt", runs / n / "manifest.json"] for n in names}
+    lines = {n: "no model.pt" for n in names if not (runs / n / "model.pt").exists()}
+    ready = [n for n in names if n not in lines]
+    if len(ready) <= MAX_TARS:
+        with_snap = {n: members[n] + _first_snapshot(runs / n) for n in ready}
+        if all(_size(v) < TAR_LIMIT - 2**20 for v in with_snap.values()) and sum(
+                map(_size, with_snap.values())) < TOTAL_LIMIT:
+            members.update(with_snap)
+        groups = [(f"{n}.tar", [n]) for n in ready]
+    else:
+        k = -(-len(ready) // MAX_TARS)  # models per tar
+        groups = [(f"models-{i}.tar", ready[j:j + k]) for i, j in enumerate(range(0, len(ready), k))]
+    for tar_name, group in groups:
+        with tarfile.open(out / tar_name, "w") as tar:
+            for n in group:
+                for p in members[n]:
+                    tar.add(p, arcname=f"{n}/{p.relative_to(runs / n).as_posix()}")
+        for n in group:
+            m = json.loads((runs / n / "manifest.json").read_text())
+            lines[n] = (f"{n}: {m.get('train_steps')} steps, digest {m.get('digest')}, final losses "
+                        f"{m.get('final_losses')}, {len(members[n]) // 2} checkpoint(s) in {tar_name}")
+    return [lines[n] for n in names]
+
+
+def _first_snapshot(run: Path) -> list[Path]:
     snaps = sorted((run / "snapshots").glob("k*")) if (run / "snapshots").is_dir() else []
-    for snap in snaps[:1]:
-        extra = [snap / "model.pt", snap / "manifest.json"]
-        if sum(p.stat().st_size for p in members + extra) < TAR_LIMIT - 2**20:
-            members += extra
-    with tarfile.open(out / f"{name}.tar", "w") as tar:
-        for p in members:
-            tar.add(p, arcname=f"{name}/{p.relative_to(run).as_posix()}")
-    manifest = json.loads((run / "manifest.json").read_text())
-    return (f"{name}: {manifest.get('train_steps')} steps, digest {manifest.get('digest')}, "
-            f"final losses {manifest.get('final_losses')}, {len(members) // 2} checkpoint(s) packed")
+    return [snaps[0] / "model.pt", snaps[0] / "manifest.json"] if snaps else []
+
+
+def _size(paths: list[Path]) -> int:
+    return sum(p.stat().st_size for p in paths)
 
 
 def main(argv: list[str]) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("out", type=Path, help="folder for <name>.tar per model and train_logs.txt")
-    ap.add_argument("--set", default="campaign", choices=sorted(SETS), help="which models (default campaign)")
+    ap.add_argument("--set", default="campaign",
+                    help=f"which models, one set or several joined by commas: {', '.join(SETS)} (default campaign)")
     ap.add_argument("--only", default="", help="comma-separated model names of the set (default all)")
     ap.add_argument("--train-until-s", type=float, default=470.0,
                     help="every run stops training this many seconds after the script started")
@@ -227,10 +273,14 @@ def main(argv: list[str]) -> int:
     ap.add_argument("overrides", nargs="*", help="extra key=value words for every training run")
     args = ap.parse_intermixed_args(argv)  # words may follow the options
     t0 = time.time()
-    models = [(n, w) for n, w in SETS[args.set] if not args.only or n in args.only.split(",")]
+    unknown = [name for name in args.set.split(",") if name not in SETS]
+    if unknown:
+        raise SystemExit(f"error: --set {args.set!r}: no set {', '.join(unknown)}; the sets are {', '.join(SETS)}")
+    in_sets = [model for name in args.set.split(",") for model in SETS[name]]
+    models = [(n, w) for n, w in in_sets if not args.only or n in args.only.split(",")]
     if not models:
         raise SystemExit(f"error: --only {args.only!r} names no model of set {args.set!r} "
-                         f"({', '.join(n for n, _ in SETS[args.set])})")
+                         f"({', '.join(n for n, _ in in_sets)})")
     env = install({**os.environ, "PYTHONUNBUFFERED": "1"})
     words = [f"train.batch_size={PAPER_BATCH}", "device=cuda", "train.lr_schedule=cosine", "train.budget_clock=wall",
              "train.max_steps=1000000", "train.ckpt_every=1000", "train.threads=1"]
@@ -248,7 +298,10 @@ def main(argv: list[str]) -> int:
     for name, model_words in models:
         maze = next(w.split("=", 1)[1] for w in model_words if w.startswith("env="))
         by_maze.setdefault(maze, []).append((name, model_words))
-    args.data_workers = args.data_workers or max(1, (os.cpu_count() or 1) // len(by_maze))
+    # the cores go to the datasets made here, less one per model that trains at once on carried data
+    made = [m for m in by_maze if not m.startswith(CARRIED_DATA)]
+    carried_models = sum(len(ms) for m, ms in by_maze.items() if m.startswith(CARRIED_DATA))
+    args.data_workers = args.data_workers or max(1, ((os.cpu_count() or 1) - carried_models) // max(1, len(made)))
     deadline, status = Deadline(t0, args.train_until_s), {}
     chains = [threading.Thread(target=maze_chain, args=(maze, ms, words, env, args, deadline, status))
               for maze, ms in by_maze.items()]
@@ -264,8 +317,8 @@ def main(argv: list[str]) -> int:
     for maze in by_maze:
         sha = [json.loads(p.read_text()).get("sha256") for p in sorted(root.glob(f"{maze}-*/manifest.json"))]
         report.append(f"data-{maze}: {status.get('data-' + maze)}; sha256 {sha}")
-    for name, _ in models:
-        report.append(pack(name, args.runs / name, args.out) + f" [{status.get(name, 'not started')}]")
+    for (name, _), line in zip(models, pack_all([n for n, _ in models], args.runs, args.out)):
+        report.append(line + f" [{status.get(name, 'not started')}]")
         report.append(tail(args.runs / "logs", name, 3))
     (args.out / "train_logs.txt").write_text("\n".join(report) + "\n")
     print("\n".join(report), flush=True)

@@ -15,7 +15,7 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO / "jobs"))
 
 from cli_words import merge  # noqa: E402  (job scripts, not package modules)
-from gpu_train import SETS, VISUAL_START  # noqa: E402
+from gpu_train import MAX_TARS, SETS, VISUAL_START, XY_START, pack_all  # noqa: E402
 
 
 def test_gpu_train_dry_run_packs_one_tar_per_model(tmp_path):
@@ -94,7 +94,7 @@ def test_visual_set_dry_run_trains_on_a_carried_store_without_making_data(tmp_pa
     """The visual chain makes no dataset (the store is carried) and trains on the latents; the words after
     the options (here the 20-episode store and the repo's data root) override the set's."""
     out = tmp_path / "out"
-    cmd = [sys.executable, "jobs/gpu_train.py", str(out), "--dry-run", "--set", "visual", "--only",
+    cmd = [sys.executable, "jobs/gpu_train.py", str(out), "--dry-run", "--set", "visual-latent", "--only",
            "visual-pointmaze-medium-h5", "--runs", str(tmp_path / "runs"), "visual.episodes=20",
            f"data.root={REPO / 'data'}"]
     done = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=600,
@@ -107,12 +107,85 @@ def test_visual_set_dry_run_trains_on_a_carried_store_without_making_data(tmp_pa
                                                       / "data-visual-pointmaze-medium.log").exists()
 
 
-def test_visual_set_continues_each_mazes_best_committed_visual_model():
-    assert [n for n, _ in SETS["visual"]] == ["visual-pointmaze-medium-h5", "visual-pointmaze-large-h5",
-                                              "visual-pointmaze-medium-h1", "visual-pointmaze-large-h1"]
-    for name, words in SETS["visual"]:
+def test_visual_latent_set_continues_each_mazes_best_committed_latent_model():
+    assert [n for n, _ in SETS["visual-latent"]] == ["visual-pointmaze-medium-h5", "visual-pointmaze-large-h5",
+                                                     "visual-pointmaze-medium-h1", "visual-pointmaze-large-h1"]
+    for name, words in SETS["visual-latent"]:
         maze = name.rsplit("-h", 1)[0].removeprefix("visual-pointmaze-")
         start = VISUAL_START[maze]
         assert f"train.init_from={start}" in words and "visual.episodes=100" in words
         manifest = json.loads((REPO / start / "manifest.json").read_text())
         assert manifest["config"]["env"]["name"] == f"visual-pointmaze-{maze}" and manifest["config"]["jump"] == 5
+
+
+def test_visual_set_continues_the_shipped_xy_planners_with_their_recipe():
+    """The [z, x, y] planners (visual.plan_xy) continue the shipped ones, named as Config.run_name names them; the
+    dense large one starts from the sparse large one, which is also a plan_xy model of the same maze."""
+    assert [n for n, _ in SETS["visual"]] == ["visual-pointmaze-medium-h5-xy", "visual-pointmaze-large-h5-xy",
+                                              "visual-pointmaze-medium-h1-xy", "visual-pointmaze-large-h1-xy"]
+    for name, words in SETS["visual"]:
+        maze, jump = name.removeprefix("visual-pointmaze-").removesuffix("-xy").rsplit("-h", 1)
+        start = XY_START[maze, int(jump)]
+        assert f"train.init_from={start}" in words and "visual.plan_xy=true" in words and f"jump={jump}" in words
+        manifest = json.loads((REPO / start / "manifest.json").read_text())
+        assert manifest["config"]["env"]["name"] == f"visual-pointmaze-{maze}" and manifest["latents"]["plan_xy"]
+        train = manifest["config"]["train"]
+        assert all(f"train.{k}={v:g}" in words for k, v in train.items() if k in ("boundary_weight", "position_weight"))
+        assert f"train.boundary_space={train['boundary_space']}" in words
+
+
+def _fake_run(runs: Path, name: str, snapshot: bool = True) -> None:
+    for d in [runs / name] + ([runs / name / "snapshots" / "k0001000"] if snapshot else []):
+        d.mkdir(parents=True)
+        (d / "model.pt").write_bytes(b"w" * 1000)
+        (d / "manifest.json").write_text(json.dumps({"train_steps": 7, "digest": name}))
+
+
+def test_pack_all_keeps_one_tar_per_model_up_to_seven_then_shares_tars(tmp_path):
+    """Up to MAX_TARS models: one tar each with its snapshot; more (sets joined by commas): they share at most
+    MAX_TARS tars without snapshots, so the tars and train_logs.txt stay within the device's 8 files."""
+    few, many = [f"m{i}" for i in range(3)], [f"n{i}" for i in range(MAX_TARS + 3)]
+    for name in few + many:
+        _fake_run(tmp_path / "runs", name)
+    _fake_run(tmp_path / "runs", "late", snapshot=False)
+    (tmp_path / "a").mkdir()
+    lines = pack_all(few + ["missing"], tmp_path / "runs", tmp_path / "a")
+    assert sorted(p.name for p in (tmp_path / "a").iterdir()) == ["m0.tar", "m1.tar", "m2.tar"]
+    with tarfile.open(tmp_path / "a" / "m1.tar") as tar:
+        assert sorted(tar.getnames()) == ["m1/manifest.json", "m1/model.pt", "m1/snapshots/k0001000/manifest.json",
+                                          "m1/snapshots/k0001000/model.pt"]
+    assert lines[-1] == "no model.pt" and "2 checkpoint(s) in m0.tar" in lines[0]
+    (tmp_path / "b").mkdir()
+    lines = pack_all(many + ["late"], tmp_path / "runs", tmp_path / "b")
+    tars = sorted((tmp_path / "b").iterdir())
+    assert len(tars) <= MAX_TARS and all(t.name.startswith("models-") for t in tars)
+    names = []
+    for t in tars:
+        with tarfile.open(t) as tar:
+            names += tar.getnames()
+    assert sorted(names) == sorted(f"{n}/{f}" for n in many + ["late"] for f in ("model.pt", "manifest.json"))
+    assert all("1 checkpoint(s) in models-" in line for line in lines)
+
+
+def test_sets_join_with_commas_and_an_unknown_set_is_named(tmp_path):
+    cmd = [sys.executable, "jobs/gpu_train.py", str(tmp_path / "out"), "--set", "ant,visual,nope", "--dry-run"]
+    done = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=60)
+    assert done.returncode != 0 and "no set nope" in done.stderr and not (tmp_path / "out").exists()
+
+
+N100_LARGE = sorted((REPO / "data").glob("visual-pointmaze-large-latents-seed0-n100-*/latents.npz"))
+
+
+@pytest.mark.skipif(not N100_LARGE, reason="no 100-episode visual-large latent store in data/ (section 13.4 makes it)")
+def test_xy_set_dry_run_trains_a_plan_xy_model_on_the_carried_store(tmp_path):
+    """What a lease runs for the visual maze: the [z, x, y] planner on the carried store, no data made."""
+    out = tmp_path / "out"
+    cmd = [sys.executable, "jobs/gpu_train.py", str(out), "--dry-run", "--set", "ant,visual", "--only",
+           "visual-pointmaze-large-h5-xy", "--runs", str(tmp_path / "runs"), f"data.root={REPO / 'data'}"]
+    done = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=600,
+                          env={**os.environ, "OMP_NUM_THREADS": "1"})
+    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
+    with tarfile.open(out / "visual-pointmaze-large-h5-xy.tar") as tar:
+        manifest = json.load(tar.extractfile("visual-pointmaze-large-h5-xy/manifest.json"))
+    assert manifest["config"]["env"]["name"] == "visual-pointmaze-large" and manifest["latents"]["plan_xy"]
+    assert manifest["config"]["train"]["boundary_space"] == "position"
