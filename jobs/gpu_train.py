@@ -7,6 +7,8 @@
     python3 jobs/gpu_train.py OUT_DIR --set ant,visual          # both sets at once (10 models, 7 tars)
     python3 jobs/gpu_train.py OUT_DIR --train-until-s 300 train.precision=bf16   # extra words go to every run
     python3 jobs/gpu_train.py OUT_DIR --dry-run                 # CPU: tiny data and model, seconds (tested)
+    python3 jobs/gpu_train.py OUT_DIR --set ant --only antmaze-giant-h5 --runs runs/gpu2 --continue-from runs/gpu
+                                                                # a second call on the warm machine (below)
 
 Made for a session lent the ``device`` tool's H200 (15 minutes in all, the machine's start
 included, nothing downloadable there), so it uses only the standard library until the project
@@ -37,6 +39,12 @@ is importable:
    lines and each dataset's sha256: at most 7 tars, inside the device tool's 8 files; with more
    than 7 models (sets joined by commas) they share tars, OUT_DIR/models-<i>.tar, without snapshots.
    A run that outlives the deadline by --grace-s is killed and its last checkpoint is packed.
+5. a second call, while the machine is still warm (it goes back 30 s after a call): runs/, data/
+   and the wheels installed in /tmp/site are still there, but checkpoints/ (left behind by
+   ``jobs/device_tree.py slim``) and every carried path the call does not name again are gone.
+   So carry again what the datasets' check needs (the ant set: checkpoints/ant-expert) and
+   continue each model from the first call's weights with ``--continue-from runs/gpu``
+   (session 33 did this by hand: docs/results.md section 4, "Session 33").
 """
 
 from __future__ import annotations
@@ -134,15 +142,20 @@ def log(msg: str) -> None:
     print(f"[gpu_train {time.strftime('%H:%M:%S')}] {msg}", flush=True)
 
 
+SITE = Path("/tmp/site")  # where carried wheels go; a second call on the warm machine finds them still there
+MARK = "gpu_train-installed"
+
+
 def install(env: dict[str, str]) -> dict[str, str]:
     """PYTHONPATH with the project (and carried wheels); stop with a clear line if a package is still missing."""
     paths = [str(REPO)]
     wheels = sorted((REPO / ".whl").glob("*.whl")) if (REPO / ".whl").is_dir() else []
     if wheels and _missing(NEEDED + FOR_DATA, {**env, "PYTHONPATH": str(REPO)}):  # else the machine has them
-        site = Path("/tmp/site")
         subprocess.run([sys.executable, "-m", "pip", "install", "-q", "--no-index", "--no-deps", "--no-compile",
-                        "--no-build-isolation", "--upgrade", "--target", str(site), *map(str, wheels)], check=True)
-        paths.append(str(site))
+                        "--no-build-isolation", "--upgrade", "--target", str(SITE), *map(str, wheels)], check=True)
+        (SITE / MARK).write_text("installed by jobs/gpu_train.py\n")
+    if (SITE / MARK).exists():  # ours, from this call or an earlier one on the same machine
+        paths.append(str(SITE))
     env = {**env, "PYTHONPATH": os.pathsep.join(paths + [p for p in [env.get("PYTHONPATH")] if p])}
     missing = _missing(NEEDED, env)
     if missing:
@@ -269,6 +282,8 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--data-workers", type=int, default=0,
                     help="processes per maze's dataset (default: the cores shared among the mazes)")
     ap.add_argument("--runs", type=Path, default=REPO / "runs" / "gpu", help="training dirs (resumable)")
+    ap.add_argument("--continue-from", type=Path, default=None,
+                    help="each model starts from <dir>/<name> (an earlier call's --runs), not from its set's start")
     ap.add_argument("--dry-run", action="store_true", help="CPU, tiny data (in --runs) and model, 2 s each")
     ap.add_argument("overrides", nargs="*", help="extra key=value words for every training run")
     args = ap.parse_intermixed_args(argv)  # words may follow the options
@@ -287,6 +302,13 @@ def main(argv: list[str]) -> int:
     if args.dry_run:
         words = merge(words, DRY, [f"data.root={args.runs / 'data'}"])
         models = [(n, [w for w in mw if not w.startswith("train.init_from")]) for n, mw in models]  # tiny shapes
+    if args.continue_from:
+        missing = [n for n, _ in models if not (args.continue_from / n / "model.pt").exists()]
+        if missing:
+            raise SystemExit(f"error: --continue-from {args.continue_from}: no model.pt for {', '.join(missing)}; "
+                             "name the --runs folder of the call that trained them")
+        models = [(n, [w for w in mw if not w.startswith("train.init_from")]
+                   + [f"train.init_from={args.continue_from / n}"]) for n, mw in models]
     else:
         smi = shutil.which("nvidia-smi")
         gpus = subprocess.run([smi, "-L"], capture_output=True, text=True) if smi else None

@@ -189,3 +189,21 @@ def test_xy_set_dry_run_trains_a_plan_xy_model_on_the_carried_store(tmp_path):
         manifest = json.load(tar.extractfile("visual-pointmaze-large-h5-xy/manifest.json"))
     assert manifest["config"]["env"]["name"] == "visual-pointmaze-large" and manifest["latents"]["plan_xy"]
     assert manifest["config"]["train"]["boundary_space"] == "position"
+
+
+def test_a_second_call_continues_each_model_from_the_first_calls_runs(tmp_path):
+    """--continue-from: what a second call on the warm machine runs (each model from the last call's weights)."""
+    runs = tmp_path / "runs"
+    first = [sys.executable, "jobs/gpu_train.py", str(tmp_path / "a"), "--dry-run", "--only", "pointmaze-medium-h5",
+             "--runs", str(runs)]
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    assert subprocess.run(first, cwd=REPO, capture_output=True, timeout=600, env=env).returncode == 0
+    second = first[:2] + [str(tmp_path / "b"), "--dry-run", "--only", "pointmaze-medium-h5", "--runs",
+                          str(tmp_path / "runs2"), "--continue-from", str(runs), f"data.root={runs / 'data'}"]
+    done = subprocess.run(second, cwd=REPO, capture_output=True, text=True, timeout=600, env=env)
+    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
+    manifest = json.loads((tmp_path / "runs2" / "pointmaze-medium-h5" / "manifest.json").read_text())
+    assert manifest["init_from"]["path"] == str(runs / "pointmaze-medium-h5")
+    missing = second[:-3] + ["--continue-from", str(tmp_path / "nowhere")]
+    done = subprocess.run(missing, cwd=REPO, capture_output=True, text=True, timeout=60, env=env)
+    assert done.returncode != 0 and "no model.pt for pointmaze-medium-h5" in done.stderr
