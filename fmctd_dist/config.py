@@ -637,6 +637,11 @@ def validate(cfg: Config) -> None:
     if cfg.model.kind == "diffuser" and cfg.diffusion.guidance_path != "input":
         raise ConfigError("diffusion.guidance_path=network applies to model.kind=df only (the U-Net has no skip "
                           "path); set diffusion.guidance_path=input")
+    if cfg.diffusion.boundary_guidance > 0 and cfg.model.frame_stack < 2:
+        raise ConfigError(f"diffusion.boundary_guidance={cfg.diffusion.boundary_guidance:g} compares each token "
+                          f"boundary's step with the step before it inside the token, but model.frame_stack="
+                          f"{cfg.model.frame_stack} leaves no such step; use a model with frame_stack >= 2 "
+                          "(every MCTD-family method) or set diffusion.boundary_guidance=0")
     if cfg.model.width % cfg.model.heads:
         raise ConfigError(f"model.width={cfg.model.width} is not divisible by model.heads={cfg.model.heads}; "
                           "pick a width that is a multiple of heads (paper 128 / 4)")

@@ -196,6 +196,16 @@ def test_boundary_term_is_zero_for_steady_motion_and_the_jump_for_a_jump():
     assert (goal_reward(x0, start, goal, boundary_weight=1.0) < goal_reward(x0, start, goal)).all()
 
 
+def test_boundary_guidance_on_one_frame_tokens_is_one_clear_error():
+    """A one-frame token (the Diffuser's) has no step inside it to compare the boundary step with."""
+    from fmctd_dist.config import load_config
+    from fmctd_dist.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="diffusion.boundary_guidance=2 .*model.frame_stack=1"):
+        load_config(["method=diffuser", "env=pointmaze-medium", "diffusion.boundary_guidance=2"])
+    assert load_config(["method=diffuser", "env=pointmaze-medium"]).diffusion.boundary_guidance == 0
+
+
 def test_a_v_checkpoint_plans_through_the_local_denoiser(tmp_path):
     cfg = tiny_cfg(6, "model.param=v_offset", "diffusion.guidance_path=network", "train.ckpt_every=6",
                    "train.val_every=6")
