@@ -102,12 +102,12 @@ def _visual(maze: str, jump: int) -> tuple[str, list[str]]:
                                                 f"train.init_from={VISUAL_START[maze]}", BW]
 
 
-# the [z, x, y] planners (visual.plan_xy; results 13.4, sessions 31-32) continue the shipped ones; the dense
-# large one, which does not exist yet, starts from the sparse large one (same width, only the jump differs)
+# the [z, x, y] planners (visual.plan_xy; results 13.4, sessions 31-33) continue the shipped ones (the dense
+# large one was started from the sparse large one on session 33's lease: same width, only the jump differs)
 XY_START = {("medium", 5): "checkpoints/visual-pointmaze-medium-h5-xy",
             ("medium", 1): "checkpoints/visual-pointmaze-medium-h1-xy",
             ("large", 5): "checkpoints/visual-pointmaze-large-h5-xy",
-            ("large", 1): "checkpoints/visual-pointmaze-large-h5-xy"}
+            ("large", 1): "checkpoints/visual-pointmaze-large-h1-xy"}
 XY_RECIPE = ["visual.plan_xy=true", BW, "train.boundary_space=position", "train.position_weight=3"]
 
 
