@@ -4,7 +4,7 @@
     python3 jobs/gpu_train.py OUT_DIR --set scratch             # the three sparse models from scratch (paper recipe)
     python3 jobs/gpu_train.py OUT_DIR --set ant                 # the six AntMaze models from the dense ant ones
     python3 jobs/gpu_train.py OUT_DIR --set visual              # the four [z, x, y] visual planners (carried stores)
-    python3 jobs/gpu_train.py OUT_DIR --set ant,visual          # both sets at once (10 models, 7 tars)
+    python3 jobs/gpu_train.py OUT_DIR --set ant,visual          # both sets at once (10 models in 5 tars)
     python3 jobs/gpu_train.py OUT_DIR --train-until-s 300 train.precision=bf16   # extra words go to every run
     python3 jobs/gpu_train.py OUT_DIR --dry-run                 # CPU: tiny data and model, seconds (tested)
     python3 jobs/gpu_train.py OUT_DIR --set ant --only antmaze-giant-h5 --runs runs/gpu2 --continue-from runs/gpu
