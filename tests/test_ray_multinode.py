@@ -63,8 +63,8 @@ def same_bits(rows, ref) -> None:
             assert r[k] == want[k], (k, r, want)
 
 
-@pytest.fixture(scope="module")
-def report(tiny_checkpoint, tmp_path_factory):
+@pytest.fixture(scope="session")  # not module: under xdist's loadgroup other modules' Ray tests can run between
+def report(tiny_checkpoint, tmp_path_factory):  # these, and a module fixture would start the cluster twice
     return run_scenarios(tiny_checkpoint, tmp_path_factory.mktemp("multinode"), ["node", "actor", "job"])
 
 
