@@ -296,23 +296,23 @@ def main(argv: list[str]) -> int:
     if not models:
         raise SystemExit(f"error: --only {args.only!r} names no model of set {args.set!r} "
                          f"({', '.join(n for n, _ in in_sets)})")
+    if args.continue_from:
+        missing = [n for n, _ in models if not (args.continue_from / n / "model.pt").exists()]
+        if missing:
+            raise SystemExit(f"error: --continue-from {args.continue_from}: no model.pt for {', '.join(missing)}; "
+                             "name the --runs folder of the call that trained them")
     env = install({**os.environ, "PYTHONUNBUFFERED": "1"})
     words = [f"train.batch_size={PAPER_BATCH}", "device=cuda", "train.lr_schedule=cosine", "train.budget_clock=wall",
              "train.max_steps=1000000", "train.ckpt_every=1000", "train.threads=1"]
     if args.dry_run:
         words = merge(words, DRY, [f"data.root={args.runs / 'data'}"])
         models = [(n, [w for w in mw if not w.startswith("train.init_from")]) for n, mw in models]  # tiny shapes
-    if args.continue_from:
-        missing = [n for n, _ in models if not (args.continue_from / n / "model.pt").exists()]
-        if missing:
-            raise SystemExit(f"error: --continue-from {args.continue_from}: no model.pt for {', '.join(missing)}; "
-                             "name the --runs folder of the call that trained them")
-        models = [(n, [w for w in mw if not w.startswith("train.init_from")]
-                   + [f"train.init_from={args.continue_from / n}"]) for n, mw in models]
     else:
         smi = shutil.which("nvidia-smi")
         gpus = subprocess.run([smi, "-L"], capture_output=True, text=True) if smi else None
         log(f"GPU: {(gpus.stdout.strip() or gpus.stderr.strip()) if gpus else 'no nvidia-smi'}")
+    if args.continue_from:
+        models = [(n, merge(mw, [f"train.init_from={args.continue_from / n}"])) for n, mw in models]
     words = merge(words, args.overrides)
     (args.runs / "logs").mkdir(parents=True, exist_ok=True)
 
