@@ -17,11 +17,15 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 JOBS = Path(__file__).resolve().parent.parent / "jobs"
 
 
+@pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     """Under pytest-xdist (``-n 2`` in pyproject), every test that uses Ray runs in one worker, in turn.
 
     One session cluster then serves them all (a second worker's cluster would contend for the
     dashboard agent's ports) and no two Ray tests share the 2 cores; pure tests fill the other worker.
+    ``tryfirst``: xdist's worker reads the ``xdist_group`` marks in its own hook of this name, which
+    pluggy would otherwise call before this one, so the marks came too late and the Ray tests were
+    spread over both workers (session fixtures such as the multinode report then ran once per worker).
     """
     for item in items:
         if item.get_closest_marker("ray") or "ray_cluster" in getattr(item, "fixturenames", ()):
