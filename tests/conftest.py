@@ -13,6 +13,11 @@ import pytest
 from fmctd_dist.device import torch_threads  # noqa: F401 - re-exported: tests do `from conftest import torch_threads`
 
 os.environ.setdefault("MUJOCO_GL", "egl")
+# before any test opens a GL context (ours or OGBench's own pixel env): Mesa's LLVM, loaded first, makes
+# triton's import segfault later in the same worker (fmctd_dist/envs/visual_pointmaze.py says more)
+from fmctd_dist.envs.visual_pointmaze import load_llvm_users_first  # noqa: E402
+
+load_llvm_users_first()
 
 JOBS = Path(__file__).resolve().parent.parent / "jobs"
 

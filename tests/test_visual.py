@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import hashlib
+import os
 import shutil
 import subprocess
 import sys
@@ -243,3 +244,16 @@ def test_a_gl_backend_that_fails_to_load_is_one_error_line(tiny_dataset):
     assert out.returncode == 2, out.stderr
     assert "error: MuJoCo could not open a GL context (MUJOCO_GL=no-such-backend)" in out.stderr
     assert "libegl1" in out.stderr and "Traceback" not in out.stderr
+
+
+def test_an_optimizer_after_rendering_does_not_crash_the_process():
+    # Mesa's EGL loads LLVM; triton (imported by torch's first optimizer) then segfaulted in the same process.
+    # A fresh interpreter, since this test process has already imported torch's compiler stack (conftest).
+    code = ("from fmctd_dist.envs.visual_pointmaze import FrameRenderer\n"
+            "import numpy as np, torch\n"
+            "FrameRenderer('visual-pointmaze-medium').render(np.zeros((1, 2)))\n"
+            "torch.optim.AdamW([torch.nn.Parameter(torch.zeros(2))])\n"
+            "print('ok')\n")
+    out = subprocess.run([sys.executable, "-c", code], cwd=REPO_ROOT, capture_output=True, text=True, timeout=300,
+                         env={**os.environ, "MUJOCO_GL": "egl", "OMP_NUM_THREADS": "1"})
+    assert out.returncode == 0 and out.stdout.strip().endswith("ok"), (out.returncode, out.stderr[-2000:])

@@ -106,10 +106,25 @@ class FrameRenderer:
         self.renderer.close()
 
 
+def load_llvm_users_first() -> None:
+    """Import torch's compiler stack (which loads triton, when installed) before the first GL context.
+
+    Mesa's EGL (llvmpipe) loads its own LLVM; triton, imported later in the same process (torch does so the
+    first time it builds an optimizer or compiles), then segfaults on the clash. Measured on this image:
+    render a frame, then ``torch.optim.AdamW(...)`` -> SIGSEGV in ``triton/knobs.py``; in the other order
+    both work. ~2 s, once per process.
+    """
+    try:
+        import torch._dynamo  # noqa: F401  (imports triton if it is installed)
+    except ImportError:
+        pass
+
+
 def _check_gl(size: int) -> None:
     """Open and free one GL context, so a missing backend is one DeviceError before any env is built."""
     import mujoco
 
+    load_llvm_users_first()
     try:
         ctx = mujoco.GLContext(size, size)  # None when MUJOCO_GL's backend failed to import
         ctx.make_current()
