@@ -37,6 +37,7 @@ from fmctd_dist.evaluation.report import ABLATIONS, ANT_ENV_ORDER, CUBE_ENV_ORDE
     METHOD_ORDER, ablation_summary, ablation_table, current_rows, fill_markers, glance_table, load_rows, \
     maze_table, merge_rows, row_key, superseded
 from fmctd_dist.evaluation.results import summarise
+from fmctd_dist.evaluation.visual_table import visual_table
 from fmctd_dist.errors import ConfigError
 
 
@@ -122,6 +123,10 @@ def main(argv: list[str]) -> int:
     robot, dropped = current_rows(archived_rows, hashes)
     if robot:
         sections["robot"] = maze_table(robot, CUBE_ENV_ORDER, CUBE_METHOD_ORDER, dropped, shipped)
+
+    # the visual maze table: the lines section 13 chose, each from its own run, settings and weights printed
+    if "<!-- report:visual -->" in doc.read_text():
+        sections["visual"] = visual_table(archived_rows)
 
     # the at-a-glance block at the top of the doc: the maze and robot lines above, one success cell each
     text = doc.read_text()

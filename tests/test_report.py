@@ -250,3 +250,29 @@ def test_glance_table_shows_todays_largest_line_per_cell_beside_the_paper():
     assert "| fast-mctd / fast-mctd-replan | 92 / 100 | 100 (1) / 100 |" in table
     assert "| s-mctd / s-mctd-replan | 100 (4) † / 100 | – / 100 |" in table
     assert "| mctd / mctd-replan | – / 100 | – / 100 |" in table
+
+
+def test_visual_table_prints_each_lines_settings_and_never_averages_two_configs():
+    import json
+
+    from fmctd_dist.config import load_config
+    from fmctd_dist.evaluation.identity import identity_columns
+    from fmctd_dist.evaluation.visual_table import VisualLine, visual_table
+
+    env = "visual-pointmaze-large"
+    plain = identity_columns(load_config([f"env={env}", "method=fast-mctd"]))
+    xy = identity_columns(load_config([f"env={env}", "method=fast-mctd", "visual.plan_xy=true",
+                                       "diffusion.boundary_guidance=8"]))
+    assert json.loads(xy["config_json"])["visual.plan_xy"] is True
+    rows = [{**row(k, s, k == 1, env=env, jump=5), **ids, "checkpoint_digest": digest, "run": "visual-x"}
+            for ids, digest in ((plain, "aaaa1111"), (xy, "bbbb2222")) for k in (1, 2) for s in (0, 1)]
+    rows += [{**row(1, 0, True, env=env, method="s-mctd", jump=5), **plain, "checkpoint_digest": "c",
+              "run": "visual-other"}]  # another run: not this table's line
+    lines = (VisualLine("fast-mctd", env, "visual-x", "ours"), VisualLine("s-mctd", env, "visual-y"))
+    table = visual_table(rows, lines)
+    assert "| fast-mctd (ours) | large | 4 (2 x 2) | 50 ± 0 | 100/0 |" in table
+    assert table.count("| fast-mctd (ours) | large |") == 2  # one line per identity
+    assert "`aaaa1111`, H=5 | default |" in table
+    assert "`bbbb2222`, H=5 | diffusion.boundary_guidance=8.0, visual.plan_xy=True |" in table
+    assert "| s-mctd | large | no rows yet |" in table and "| mctd | large | not run |" in table
+    assert "| mctd-replan | medium | not run | | | | | | | 86 / 129.8 s |" in table
