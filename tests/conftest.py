@@ -19,6 +19,24 @@ from fmctd_dist.envs.visual_pointmaze import load_llvm_users_first  # noqa: E402
 
 load_llvm_users_first()
 
+
+def worker_threads() -> int:
+    """Torch threads per test process: this machine's cores shared by the xdist workers (``-n 2`` in pyproject).
+
+    Torch's default, one thread per core in each of two workers, puts 4 spinning threads on 2 cores, which
+    makes every model call slower (``fmctd_dist.device.set_threads`` says why jobs run ``threads=1`` next
+    to each other); the subprocesses tests start (jobs/*.py) inherit the count through ``OMP_NUM_THREADS``.
+    """
+    workers = max(1, int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1")))
+    return max(1, (os.cpu_count() or 1) // workers)
+
+
+if "PYTEST_XDIST_WORKER" in os.environ:
+    import torch
+
+    torch.set_num_threads(worker_threads())
+    os.environ.setdefault("OMP_NUM_THREADS", str(worker_threads()))
+
 JOBS = Path(__file__).resolve().parent.parent / "jobs"
 
 

@@ -3,7 +3,7 @@ seed 0, on CPU; the shipped medium Diffuser, resampled, plans task 1 without a w
 
 import numpy as np
 import pytest
-from conftest import torch_threads
+from conftest import torch_threads, worker_threads
 
 from fmctd_dist.config import load_config
 from fmctd_dist.denoiser.local import LocalDenoiser
@@ -18,7 +18,7 @@ def shipped_fast_mctd_episode(env: str, task: int = 1, seed: int = 0) -> dict:
     """One Fast-MCTD episode in process with the shipped checkpoint (and, for the ant, the shipped policy)."""
     cfg = load_config(["method=fast-mctd", f"env={env}"])
     model, manifest = load_checkpoint(cfg.checkpoint_dir(), cfg)
-    with torch_threads(2):
+    with torch_threads(worker_threads()):
         denoiser = LocalDenoiser(model, cfg.diffusion, "cpu", cfg.ray.micro_batch)
         planner = make_planner(cfg, denoiser, normaliser_from_manifest(manifest))
         return run_episode(cfg, make_env(cfg.env.name), planner, task=task, seed=seed)
@@ -90,7 +90,7 @@ def test_replanning_search_with_the_shipped_cube_model_and_policy_solves_cube_si
 
     cfg = load_config([f"method={method}", "env=cube-single"])
     model, manifest = load_checkpoint(cfg.checkpoint_dir(), cfg)
-    with torch_threads(2):
+    with torch_threads(worker_threads()):
         planner = make_planner(cfg, LocalDenoiser(model, cfg.diffusion, "cpu", cfg.ray.micro_batch),
                                normaliser_from_manifest(manifest))
         row = hooks_for(cfg.env.name).episodes(cfg).run(planner, 1, 0)
