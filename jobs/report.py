@@ -8,8 +8,9 @@ Reads the run ``main`` (the maze tables: every method x PointMaze / AntMaze maze
 ``jobs/eval.py ... eval.run=ablate-k/10`` etc.; the commands are in docs/results.md), and
 rewrites only the blocks between ``<!-- report:NAME -->`` markers. Runs cited by hand-written
 sections (cubes, visual maze, recipe and option benches: ``ARCHIVED``) are not tabulated here but
-their rows are archived with the rest; the one exception is the robot table (block ``robot``):
-every archived cube episode whose config hash is today's default for its method and env. The block
+their rows are archived with the rest; the exceptions are the robot table (block ``robot``):
+every archived cube episode whose config hash is today's default for its method and env, and the
+visual table (block ``visual``): the lines ``fmctd_dist/evaluation/visual_table.py`` names, one run each. The block
 ``glance`` at the doc's top, where the doc has one, puts one success cell per method x env of those
 tables beside the paper's. An episode
 re-run with another identity (retrained weights at the same path) keeps its earlier row in the archive,
