@@ -125,12 +125,12 @@ def main(argv: list[str]) -> int:
     if robot:
         sections["robot"] = maze_table(robot, CUBE_ENV_ORDER, CUBE_METHOD_ORDER, dropped, shipped)
 
+    text = doc.read_text()
     # the visual maze table: the lines section 13 chose, each from its own run, settings and weights printed
-    if "<!-- report:visual -->" in doc.read_text():
+    if "<!-- report:visual -->" in text:
         sections["visual"] = visual_table(archived_rows)
 
     # the at-a-glance block at the top of the doc: the maze and robot lines above, one success cell each
-    text = doc.read_text()
     if "<!-- report:glance -->" in text:
         columns = {**{e: METHOD_ORDER for e in ENV_ORDER + ANT_ENV_ORDER},
                    **{e: CUBE_METHOD_ORDER for e in CUBE_ENV_ORDER}}

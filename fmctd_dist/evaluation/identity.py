@@ -71,6 +71,19 @@ def row_identity(row: dict[str, Any]) -> tuple:
     return row.get("config_hash"), row.get("checkpoint_digest"), row.get("episode_time_limit")
 
 
+def changed_fields(row: dict[str, Any], cfg: Config) -> dict[str, tuple[Any, Any]]:
+    """Plan fields whose value in a row's recorded config (``config_json``) differs from ``cfg``'s: key ->
+    (the row's value, ``cfg``'s value), each read against ``Config()``'s defaults where not recorded."""
+    theirs, ours = json.loads(row.get("config_json") or "{}"), plan_config(cfg)
+    default = plan_fields(Config())
+    out = {}
+    for key in sorted(set(theirs) | set(ours)):
+        a, b = theirs.get(key, default.get(key)), ours.get(key, default.get(key))
+        if a != b:
+            out[key] = (a, b)
+    return out
+
+
 def differences(row: dict[str, Any], cfg: Config, checkpoint_digest: str, policy_digest: str = "") -> list[str]:
     """Human-readable ``field: rows have A, this run has B`` lines (empty = same identity)."""
     out = []
@@ -82,12 +95,7 @@ def differences(row: dict[str, Any], cfg: Config, checkpoint_digest: str, policy
     if row.get("config_hash") == config_hash(cfg):
         return out
     if row.get("config_json"):
-        theirs, ours = json.loads(row["config_json"]), plan_config(cfg)
-        default = plan_fields(Config())
-        for key in sorted(set(theirs) | set(ours)):
-            a, b = theirs.get(key, default.get(key)), ours.get(key, default.get(key))
-            if a != b:
-                out.append(f"{key}: rows have {a!r}, this run has {b!r}")
+        out += [f"{key}: rows have {a!r}, this run has {b!r}" for key, (a, b) in changed_fields(row, cfg).items()]
         if not out or (len(out) == 1 and out[0].startswith("checkpoint")):
             out.append(f"config schema: rows have {row.get('config_schema')}, this run has {CONFIG_SCHEMA} "
                        "(a config default changed meaning)")

@@ -11,13 +11,12 @@ identity, :func:`fmctd_dist.evaluation.results.summarise`).
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import Any
 
 from fmctd_dist.config import Config, load_config
-from fmctd_dist.evaluation.identity import plan_fields, row_identity
+from fmctd_dist.evaluation.identity import changed_fields, row_identity
 from fmctd_dist.evaluation.paper import paper_cell
 from fmctd_dist.evaluation.results import summarise
 
@@ -65,24 +64,15 @@ VISUAL_LINES: tuple[VisualLine, ...] = (
 
 
 @lru_cache(maxsize=None)
-def _default_fields(method: str, env: str) -> dict[str, Any]:
-    return plan_fields(load_config([f"env={env}", f"method={method}"]))
-
-
-@lru_cache(maxsize=1)
-def _global_fields() -> dict[str, Any]:
-    return plan_fields(Config())
+def _default_config(method: str, env: str) -> Config:
+    return load_config([f"env={env}", f"method={method}"])
 
 
 def settings(row: dict[str, Any]) -> str:
     """What the row's config changes against its method's default on its env, e.g.
     ``visual.plan_xy=True, diffusion.boundary_guidance=8.0`` ("default" when nothing)."""
-    given = json.loads(row.get("config_json") or "{}")  # the fields that differ from Config()'s defaults
-    full = {**_global_fields(), **given}
-    default = _default_fields(row["method"], row["env"])
-    diff = {k: full.get(k) for k in sorted(set(full) | set(default))
-            if k not in _NAMES and full.get(k) != default.get(k)}
-    return ", ".join(f"{k}={v}" for k, v in diff.items()) or "default"
+    diff = changed_fields(row, _default_config(row["method"], row["env"]))
+    return ", ".join(f"{k}={a}" for k, (a, _) in diff.items() if k not in _NAMES) or "default"
 
 
 def visual_table(rows: list[dict[str, Any]], lines: tuple[VisualLine, ...] = VISUAL_LINES) -> str:
