@@ -276,3 +276,5 @@ def test_visual_table_prints_each_lines_settings_and_never_averages_two_configs(
     assert "`bbbb2222`, H=5 | diffusion.boundary_guidance=8.0, visual.plan_xy=True |" in table
     assert "| s-mctd | large | no rows yet |" in table and "| mctd | large | not run |" in table
     assert "| mctd-replan | medium | not run | | | | | | | 86 / 129.8 s |" in table
+    # a run still going prints how much of its grid it has, so a partial line never reads as whole
+    assert "| fast-mctd (ours) | large | 3 (2 x 2, partial: 3 of 4) | 75 ± 25 | 100/0 |" in visual_table(rows[:3], lines)

@@ -49,6 +49,7 @@ VISUAL_LINES: tuple[VisualLine, ...] = (
     VisualLine("s-mctd", "visual-pointmaze-medium", "visual-s29-default-warp8", "latent, warp 8"),
     VisualLine("fast-mctd", "visual-pointmaze-medium", "visual-s29-default", "latent, the maze rule"),
     VisualLine("fast-mctd", "visual-pointmaze-medium", "visual-s32-bg8", "[z, x, y] + boundary guidance"),
+    VisualLine("mctd-replan", "visual-pointmaze-medium", "visual-replan-medium-xy", "[z, x, y]"),
     VisualLine("fast-mctd-replan", "visual-pointmaze-medium", "visual-s29-default-warp8", "latent, warp 8"),
     VisualLine("diffuser", "visual-pointmaze-large", "visual-methods-s14"),
     VisualLine("diffuser-replan", "visual-pointmaze-large", "visual-methods-s14"),
@@ -58,6 +59,7 @@ VISUAL_LINES: tuple[VisualLine, ...] = (
     VisualLine("p-mctd", "visual-pointmaze-large", "visual-s35-large-xy", "[z, x, y]"),
     VisualLine("s-mctd", "visual-pointmaze-large", "visual-s35-large-xy-bg8", "[z, x, y] + boundary guidance"),
     VisualLine("fast-mctd", "visual-pointmaze-large", "visual-s33-large-xy-bg8", "[z, x, y] + boundary guidance"),
+    VisualLine("mctd-replan", "visual-pointmaze-large", "visual-replan-large-xy", "[z, x, y]"),
     VisualLine("fast-mctd-replan", "visual-pointmaze-large", "visual-s35-large-xy-bg8",
                "[z, x, y] + boundary guidance"),
 )
@@ -97,8 +99,10 @@ def visual_table(rows: list[dict[str, Any]], lines: tuple[VisualLine, ...] = VIS
                     one = next(r for r in rs if row_identity(r) == s["identity"])
                     name = f"{method} ({ln.note})" if ln.note else method
                     per_task = "/".join(f"{v:.0f}" for v in s["per_task"].values())
+                    grid = len(s["per_task"]) * s["seeds"]  # a run still going (or cut) fills part of its grid
+                    partial = f", partial: {s['episodes']} of {grid}" if s["episodes"] < grid else ""
                     out.append(
-                        f"| {name} | {maze} | {s['episodes']} ({len(s['per_task'])} x {s['seeds']}) | "
+                        f"| {name} | {maze} | {s['episodes']} ({len(s['per_task'])} x {s['seeds']}{partial}) | "
                         f"{s['success']:.0f} ± {s['success_std']:.0f} | {per_task} | "
                         f"{s['plan_time_s']:.1f} ± {s['plan_time_std']:.1f} | "
                         f"`{str(s['checkpoint_digest'])[:8]}`, H={one.get('jump')} | {settings(one)} | "
