@@ -257,14 +257,15 @@ def test_visual_table_prints_each_lines_settings_and_never_averages_two_configs(
 
     from fmctd_dist.config import load_config
     from fmctd_dist.evaluation.identity import identity_columns
-    from fmctd_dist.evaluation.visual_table import VisualLine, visual_table
+    from fmctd_dist.evaluation.visual_table import VisualLine, search_statuses, visual_table
 
     env = "visual-pointmaze-large"
     plain = identity_columns(load_config([f"env={env}", "method=fast-mctd"]))
     xy = identity_columns(load_config([f"env={env}", "method=fast-mctd", "visual.plan_xy=true",
                                        "diffusion.boundary_guidance=8"]))
     assert json.loads(xy["config_json"])["visual.plan_xy"] is True
-    rows = [{**row(k, s, k == 1, env=env, jump=5), **ids, "checkpoint_digest": digest, "run": "visual-x"}
+    rows = [{**row(k, s, k == 1, env=env, jump=5), **ids, "checkpoint_digest": digest, "run": "visual-x",
+             "plan_status": "early_stop" if k == 1 else "stay,stay"}  # task 2 replanned once, both searches empty
             for ids, digest in ((plain, "aaaa1111"), (xy, "bbbb2222")) for k in (1, 2) for s in (0, 1)]
     rows += [{**row(1, 0, True, env=env, method="s-mctd", jump=5), **plain, "checkpoint_digest": "c",
               "run": "visual-other"}]  # another run: not this table's line
@@ -272,9 +273,10 @@ def test_visual_table_prints_each_lines_settings_and_never_averages_two_configs(
     table = visual_table(rows, lines)
     assert "| fast-mctd (ours) | large | 4 (2 x 2) | 50 ± 0 | 100/0 |" in table
     assert table.count("| fast-mctd (ours) | large |") == 2  # one line per identity
-    assert "`aaaa1111`, H=5 | default |" in table
+    assert "| stay 4, early_stop 2 | `aaaa1111`, H=5 | default |" in table  # every plan's status, counted
     assert "`bbbb2222`, H=5 | diffusion.boundary_guidance=8.0, visual.plan_xy=True |" in table
     assert "| s-mctd | large | no rows yet |" in table and "| mctd | large | not run |" in table
-    assert "| mctd-replan | medium | not run | | | | | | | 86 / 129.8 s |" in table
+    assert "| mctd-replan | medium | not run | | | | | | | | 86 / 129.8 s |" in table
+    assert search_statuses([{"plan_status": "plan,plan"}, {"plan_status": "plan"}]) == "no search"  # DF, Diffuser
     # a run still going prints how much of its grid it has, so a partial line never reads as whole
     assert "| fast-mctd (ours) | large | 3 (2 x 2, partial: 3 of 4) | 75 ± 25 | 100/0 |" in visual_table(rows[:3], lines)

@@ -11,6 +11,7 @@ identity, :func:`fmctd_dist.evaluation.results.summarise`).
 
 from __future__ import annotations
 
+from collections import Counter
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import Any
@@ -77,26 +78,38 @@ def settings(row: dict[str, Any]) -> str:
     return ", ".join(f"{k}={a}" for k, (a, _) in diff.items() if k not in _NAMES) or "default"
 
 
+def search_statuses(rows: list[dict[str, Any]]) -> str:
+    """How a line's plans ended, counted over all its plans (``stay 10``, ``not_reached 9, stay 1``): a 0% search
+    line that only ever returned "stay" (every candidate warped) reads differently from one that planned and
+    missed. Planners without a search report every plan as "plan": "no search"."""
+    counts = Counter(s for r in rows for s in str(r.get("plan_status", "")).split(",") if s)
+    if set(counts) <= {"plan"}:
+        return "no search"
+    return ", ".join(f"{k} {v}" for k, v in counts.most_common())
+
+
 def visual_table(rows: list[dict[str, Any]], lines: tuple[VisualLine, ...] = VISUAL_LINES) -> str:
     """Markdown: per maze, the paper's methods in its order, each :data:`VISUAL_LINES` line summarised from
     the rows of its run, with its settings, weights and run beside the paper's cell."""
     out = ["| method | maze | episodes (tasks x seeds) | success (%) | per task | planning s per episode | "
-           "model: digest, jump | settings against the method's default | run | paper: success / time (GPU) |",
-           "|---|---|---|---|---|---|---|---|---|---|"]
+           "searches' status | model: digest, jump | settings against the method's default | run | "
+           "paper: success / time (GPU) |",
+           "|---|---|---|---|---|---|---|---|---|---|---|"]
     for env in VISUAL_ENVS:
         maze = env.rsplit("-", 1)[1]
         for method in VISUAL_METHODS:
             mine = [ln for ln in lines if ln.method == method and ln.env == env]
             paper = paper_cell(method, env)
             if not mine:
-                out.append(f"| {method} | {maze} | not run | | | | | | | {paper} |")
+                out.append(f"| {method} | {maze} | not run | | | | | | | | {paper} |")
             for ln in mine:
                 rs = [r for r in rows if r["run"] == ln.run and r["method"] == method and r["env"] == env]
                 if not rs:
-                    out.append(f"| {method} | {maze} | no rows yet | | | | | | `{ln.run}` | {paper} |")
+                    out.append(f"| {method} | {maze} | no rows yet | | | | | | | `{ln.run}` | {paper} |")
                     continue
                 for s in summarise(rs):  # one line per config / checkpoint, never averaged together
-                    one = next(r for r in rs if row_identity(r) == s["identity"])
+                    line_rows = [r for r in rs if row_identity(r) == s["identity"]]
+                    one = line_rows[0]
                     name = f"{method} ({ln.note})" if ln.note else method
                     per_task = "/".join(f"{v:.0f}" for v in s["per_task"].values())
                     grid = len(s["per_task"]) * s["seeds"]  # a run still going (or cut) fills part of its grid
@@ -104,7 +117,7 @@ def visual_table(rows: list[dict[str, Any]], lines: tuple[VisualLine, ...] = VIS
                     out.append(
                         f"| {name} | {maze} | {s['episodes']} ({len(s['per_task'])} x {s['seeds']}{partial}) | "
                         f"{s['success']:.0f} ± {s['success_std']:.0f} | {per_task} | "
-                        f"{s['plan_time_s']:.1f} ± {s['plan_time_std']:.1f} | "
+                        f"{s['plan_time_s']:.1f} ± {s['plan_time_std']:.1f} | {search_statuses(line_rows)} | "
                         f"`{str(s['checkpoint_digest'])[:8]}`, H={one.get('jump')} | {settings(one)} | "
                         f"`{ln.run}` | {paper} |")
     return "\n".join(out)
