@@ -68,6 +68,30 @@ def test_episode_row_and_replanning(tiny_checkpoint):
     assert len(row["traj_xy"]) == 2 * (row["env_steps"] + 1)
 
 
+def test_the_progress_bar_counts_an_episodes_plans_and_changes_none(tiny_checkpoint):
+    from fmctd_dist.evaluation.grid import PlanTicker
+
+    class Bar:
+        def __init__(self):
+            self.postfixes = []
+
+        def set_postfix(self, **kw):
+            self.postfixes.append(kw)
+
+    cfg, planner = planner_for(tiny_checkpoint, 64, "method.replan_every=30")
+    bar = Bar()
+    ticker = PlanTicker(planner, bar)
+    ticker.start(3, 0, success="0/0")
+    row = run_episode(cfg, make_env(cfg.env.name), ticker, task=3, seed=0)
+    plain = run_episode(cfg, make_env(cfg.env.name), planner, task=3, seed=0)
+    assert np.array_equal(row["traj_xy"], plain["traj_xy"]) and row["plan_status"] == plain["plan_status"]
+    assert [b["plans"] for b in bar.postfixes] == list(range(1, row["plans"] + 1))
+    assert {b["episode"] for b in bar.postfixes} == {"3/0"}
+    assert [b["last"] for b in bar.postfixes] == row["plan_status"].split(",")
+    ticker.start(4, 1, success="0/1")
+    assert ticker.plans == 0 and ticker.episode == "4/1"
+
+
 def run_eval(args, *extra):
     return subprocess.run([sys.executable, "jobs/eval.py", *args, *extra], cwd=REPO_ROOT, capture_output=True,
                           text=True, timeout=600)
