@@ -279,4 +279,7 @@ def test_visual_table_prints_each_lines_settings_and_never_averages_two_configs(
     assert "| mctd-replan | medium | not run | | | | | | | | 86 / 129.8 s |" in table
     assert search_statuses([{"plan_status": "plan,plan"}, {"plan_status": "plan"}]) == "no search"  # DF, Diffuser
     # a run still going prints how much of its grid it has, so a partial line never reads as whole
-    assert "| fast-mctd (ours) | large | 3 (2 x 2, partial: 3 of 4) | 75 ± 25 | 100/0 |" in visual_table(rows[:3], lines)
+    partial = visual_table(rows[:3], lines)
+    assert "| fast-mctd (ours) | large | 3 (2 x 2, partial: 3 of 4) | 75 ± 25 | 100/0 |" in partial
+    planned = (VisualLine("fast-mctd", env, "visual-x", "ours", episodes=10),)  # the grid its run will fill
+    assert "| fast-mctd (ours) | large | 4 (2 x 2, partial: 4 of 10) |" in visual_table(rows[:4], planned)

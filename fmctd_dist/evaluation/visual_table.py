@@ -36,6 +36,7 @@ class VisualLine:
     env: str
     run: str
     note: str = ""  # why this line is in the table (e.g. "the paper's latent planner")
+    episodes: int = 0  # the grid its run is meant to fill, for a run still going (0: the tasks x seeds its rows cover)
 
 
 # The lines of today's table, in the paper's order. A method x maze may have several (the paper's own
@@ -50,7 +51,7 @@ VISUAL_LINES: tuple[VisualLine, ...] = (
     VisualLine("s-mctd", "visual-pointmaze-medium", "visual-s29-default-warp8", "latent, warp 8"),
     VisualLine("fast-mctd", "visual-pointmaze-medium", "visual-s29-default", "latent, the maze rule"),
     VisualLine("fast-mctd", "visual-pointmaze-medium", "visual-s32-bg8", "[z, x, y] + boundary guidance"),
-    VisualLine("mctd-replan", "visual-pointmaze-medium", "visual-replan-medium-xy", "[z, x, y]"),
+    VisualLine("mctd-replan", "visual-pointmaze-medium", "visual-replan-medium-xy", "[z, x, y]", episodes=10),
     VisualLine("fast-mctd-replan", "visual-pointmaze-medium", "visual-s29-default-warp8", "latent, warp 8"),
     VisualLine("diffuser", "visual-pointmaze-large", "visual-methods-s14"),
     VisualLine("diffuser-replan", "visual-pointmaze-large", "visual-methods-s14"),
@@ -60,7 +61,7 @@ VISUAL_LINES: tuple[VisualLine, ...] = (
     VisualLine("p-mctd", "visual-pointmaze-large", "visual-s35-large-xy", "[z, x, y]"),
     VisualLine("s-mctd", "visual-pointmaze-large", "visual-s35-large-xy-bg8", "[z, x, y] + boundary guidance"),
     VisualLine("fast-mctd", "visual-pointmaze-large", "visual-s33-large-xy-bg8", "[z, x, y] + boundary guidance"),
-    VisualLine("mctd-replan", "visual-pointmaze-large", "visual-replan-large-xy", "[z, x, y]"),
+    VisualLine("mctd-replan", "visual-pointmaze-large", "visual-replan-large-xy", "[z, x, y]", episodes=10),
     VisualLine("fast-mctd-replan", "visual-pointmaze-large", "visual-s35-large-xy-bg8",
                "[z, x, y] + boundary guidance"),
 )
@@ -112,7 +113,7 @@ def visual_table(rows: list[dict[str, Any]], lines: tuple[VisualLine, ...] = VIS
                     one = line_rows[0]
                     name = f"{method} ({ln.note})" if ln.note else method
                     per_task = "/".join(f"{v:.0f}" for v in s["per_task"].values())
-                    grid = len(s["per_task"]) * s["seeds"]  # a run still going (or cut) fills part of its grid
+                    grid = max(ln.episodes, len(s["per_task"]) * s["seeds"])  # a run still going fills part of it
                     partial = f", partial: {s['episodes']} of {grid}" if s["episodes"] < grid else ""
                     out.append(
                         f"| {name} | {maze} | {s['episodes']} ({len(s['per_task'])} x {s['seeds']}{partial}) | "
