@@ -283,3 +283,15 @@ def test_visual_table_prints_each_lines_settings_and_never_averages_two_configs(
     assert "| fast-mctd (ours) | large | 3 (2 x 2, partial: 3 of 4) | 75 ± 25 | 100/0 |" in partial
     planned = (VisualLine("fast-mctd", env, "visual-x", "ours", episodes=10),)  # the grid its run will fill
     assert "| fast-mctd (ours) | large | 4 (2 x 2, partial: 4 of 10) |" in visual_table(rows[:4], planned)
+
+
+def test_plan_statuses_reads_back_what_the_tally_writes():
+    from collections import Counter
+
+    from fmctd_dist.evaluation.plan_tally import PlanTally, plan_statuses
+
+    written = PlanTally(plans=4, statuses=["stay", "achieved", "stay", "early_stop"]).columns()
+    assert plan_statuses(written) == Counter(stay=2, achieved=1, early_stop=1)
+    assert list(plan_statuses(written)) == ["stay", "achieved", "early_stop"]  # first-seen order, for reports
+    assert plan_statuses(PlanTally().columns()) == Counter()  # no plan yet
+    assert plan_statuses({}) == Counter() == plan_statuses({"plan_status": None})  # rows that predate the column

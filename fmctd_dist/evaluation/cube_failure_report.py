@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from fmctd_dist.evaluation.cube_failures import REASONS
+from fmctd_dist.evaluation.plan_tally import plan_statuses
 
 
 def has_reasons(rows: list[dict[str, Any]]) -> bool:
@@ -30,7 +31,7 @@ def failure_facts(r: dict[str, Any]) -> dict[str, Any]:
     """The measured facts of one failed cube row (distances in obs units; success is within 0.4)."""
     goal = np.asarray(r["goal_cubes"], np.float64).reshape(-1, 3)
     plan, traj = _cubes(r, "plan_cubes"), _cubes(r, "traj_cubes")
-    statuses = Counter(s for s in str(r.get("plan_status", "")).split(",") if s)
+    statuses = plan_statuses(r)
     return {"task": r["task"], "seed": r["seed"], "reason": r["why_failed"] or "?",
             "plans": int(r.get("plans", sum(statuses.values()))), "statuses": dict(statuses),
             "targets": str(r.get("targets", "")), "releases": int(r.get("releases", 0)), "steps": int(r["env_steps"]),

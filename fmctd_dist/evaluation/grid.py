@@ -116,6 +116,11 @@ class PlanTicker:
         return out
 
 
+def _successes(rows: list[dict[str, Any]]) -> str:
+    """``solved/done`` of the episodes this run has finished, for the progress bar."""
+    return f"{sum(r['success'] for r in rows)}/{len(rows)}"
+
+
 def run_local(p: Prepared, store: ResultStore, progress: bool = True,
               log: Callable[[str], None] = print) -> list[dict[str, Any]]:
     """All missing episodes of the grid in this process (LocalDenoiser, no Ray)."""
@@ -137,10 +142,10 @@ def run_local(p: Prepared, store: ResultStore, progress: bool = True,
     bar = tqdm(todo, desc=f"{cfg.method.name} {cfg.env.name}", unit="ep", disable=not progress)
     ticker = PlanTicker(planner, bar)
     for task, seed in bar:
-        ticker.start(task, seed, success=f"{sum(r['success'] for r in rows)}/{len(rows)}")
+        ticker.start(task, seed, success=_successes(rows))
         row = {**episodes.run(ticker, task, seed), **provenance(p, 0)}
         store.write(row)
         rows.append(row)
-        bar.set_postfix(success=f"{sum(r['success'] for r in rows)}/{len(rows)}")
+        bar.set_postfix(success=_successes(rows))
         log(describe(row))
     return rows

@@ -6,6 +6,8 @@ their plans the same way, so reports and tables read one set of columns from eit
 
 from __future__ import annotations
 
+from collections import Counter
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -42,3 +44,9 @@ class PlanTally:
                 "call_share": self.denoise_call_s / t if t > 0 else 0.0, "expansions": self.expansions,
                 "iterations": self.iterations, "retries": self.retries, "plans": self.plans,
                 "plan_status": ",".join(self.statuses)}
+
+
+def plan_statuses(row: Mapping[str, Any]) -> Counter[str]:
+    """How each of a row's plans ended, counted (``{"stay": 3, "achieved": 1}``): the one reader of the
+    ``plan_status`` column that :meth:`PlanTally.columns` writes, so tables and reports count it alike."""
+    return Counter(s for s in str(row.get("plan_status") or "").split(",") if s)

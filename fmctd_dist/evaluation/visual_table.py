@@ -19,6 +19,7 @@ from typing import Any
 from fmctd_dist.config import Config, load_config
 from fmctd_dist.evaluation.identity import changed_fields, row_identity
 from fmctd_dist.evaluation.paper import paper_cell
+from fmctd_dist.evaluation.plan_tally import plan_statuses
 from fmctd_dist.evaluation.results import summarise
 
 VISUAL_ENVS = ("visual-pointmaze-medium", "visual-pointmaze-large")
@@ -83,7 +84,7 @@ def search_statuses(rows: list[dict[str, Any]]) -> str:
     """How a line's plans ended, counted over all its plans (``stay 10``, ``not_reached 9, stay 1``): a 0% search
     line that only ever returned "stay" (every candidate warped) reads differently from one that planned and
     missed. Planners without a search report every plan as "plan": "no search"."""
-    counts = Counter(s for r in rows for s in str(r.get("plan_status", "")).split(",") if s)
+    counts = sum((plan_statuses(r) for r in rows), Counter())
     if set(counts) <= {"plan"}:
         return "no search"
     return ", ".join(f"{k} {v}" for k, v in counts.most_common())
