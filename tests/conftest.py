@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import importlib.util
 import os
+import shutil
 import sys
+import tempfile
 from pathlib import Path
 from types import ModuleType
 
@@ -40,19 +42,72 @@ if "PYTEST_XDIST_WORKER" in os.environ:
 JOBS = Path(__file__).resolve().parent.parent / "jobs"
 
 
-@pytest.hookimpl(tryfirst=True)
+def uses_ray(item: pytest.Item) -> bool:
+    """A test that needs the session Ray cluster: marked ``ray`` or asking for the ``ray_cluster`` fixture."""
+    return item.get_closest_marker("ray") is not None or "ray_cluster" in getattr(item, "fixturenames", ())
+
+
+RUN_DIR = "FMCTD_PYTEST_RUN_DIR"  # a folder the xdist controller and its workers share for one pytest run
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """The controller (or a run without xdist) makes the run's shared folder; workers inherit its path."""
+    if "PYTEST_XDIST_WORKER" not in os.environ and RUN_DIR not in os.environ:
+        os.environ[RUN_DIR] = tempfile.mkdtemp(prefix="fmctd-pytest-")
+        config.add_cleanup(lambda: shutil.rmtree(os.environ.pop(RUN_DIR), ignore_errors=True))
+
+
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """Under pytest-xdist (``-n 2`` in pyproject), every test that uses Ray runs in one worker, in turn.
+    """Each xdist worker lists the Ray tests it collected, for the controller's scheduler below."""
+    worker = os.environ.get("PYTEST_XDIST_WORKER")
+    if worker is not None and RUN_DIR in os.environ:
+        ray_ids = [item.nodeid for item in items if uses_ray(item)]
+        (Path(os.environ[RUN_DIR]) / f"ray-tests-{worker}.txt").write_text("\n".join(ray_ids))
+
+
+@pytest.hookimpl(tryfirst=True, optionalhook=True)
+def pytest_xdist_make_scheduler(config: pytest.Config, log):
+    """``--dist loadgroup`` (pyproject's addopts): every Ray test in one worker, in turn; the rest load-balanced.
 
     One session cluster then serves them all (a second worker's cluster would contend for the
     dashboard agent's ports) and no two Ray tests share the 2 cores; pure tests fill the other worker.
-    ``tryfirst``: xdist's worker reads the ``xdist_group`` marks in its own hook of this name, which
-    pluggy would otherwise call before this one, so the marks came too late and the Ray tests were
-    spread over both workers (session fixtures such as the multinode report then ran once per worker).
+    The Ray tests are known from the workers' lists (above), not from xdist's ``xdist_group`` node-id
+    suffix, which pytest 9.2 no longer lets xdist 3.8 write (the Ray tests were spread over both workers).
+    ``ray_cluster`` checks the result at run time (``claim_ray_worker``).
     """
-    for item in items:
-        if item.get_closest_marker("ray") or "ray_cluster" in getattr(item, "fixturenames", ()):
-            item.add_marker(pytest.mark.xdist_group("ray"))
+    if config.getvalue("dist") != "loadgroup":
+        return None
+    from xdist.scheduler import LoadScopeScheduling
+
+    class RayGroupScheduling(LoadScopeScheduling):
+        """One scope, "ray", for every Ray test; every other test is a scope of its own."""
+
+        ray_ids: frozenset[str] | None = None
+
+        def _split_scope(self, nodeid: str) -> str:
+            if self.ray_ids is None:  # read once: every worker has written its list before it reports
+                self.ray_ids = frozenset(line for f in Path(os.environ[RUN_DIR]).glob("ray-tests-*.txt")
+                                         for line in f.read_text().splitlines())
+            return "ray" if nodeid in self.ray_ids else nodeid
+
+    return RayGroupScheduling(config, log)
+
+
+def claim_ray_worker(run_dir: Path, worker: str) -> None:
+    """Record that ``worker`` owns the session Ray cluster; raise if another xdist worker started one too.
+
+    ``run_dir`` is the folder every worker of one pytest run shares. This checks the grouping by its
+    effect, one worker for every Ray test, not by how xdist was told.
+    """
+    owner = run_dir / "ray-cluster-worker"
+    try:
+        with open(owner, "x") as f:
+            f.write(worker)
+    except FileExistsError:
+        first = owner.read_text()
+        if first != worker:
+            raise RuntimeError(f"Ray tests ran on two xdist workers ({first} and {worker}): the Ray group's "
+                               "scheduler did not apply (tests/conftest.py, pytest_xdist_make_scheduler)") from None
 
 
 def load_job(name: str) -> ModuleType:
@@ -132,6 +187,9 @@ def ray_cluster():
 
     from fmctd_dist.evaluation.ray_runner import local_cluster_env
 
+    worker = os.environ.get("PYTEST_XDIST_WORKER")
+    if worker is not None and RUN_DIR in os.environ:
+        claim_ray_worker(Path(os.environ[RUN_DIR]), worker)
     local_cluster_env()  # workers at nice 0, as for a cluster jobs/eval.py starts
     before = os.environ.get("RAY_AUTH_MODE")
     os.environ["RAY_AUTH_MODE"] = "disabled"
