@@ -16,7 +16,7 @@ without a warp (a step over 0.75 + 0.25 H: the authors' 1.0 dense, 2.0 at H=5), 
 maze cells, share of plans "valid" (no warp, and no step crosses a wall: the value's warp test
 sees only the first), share of guided plans that come within 2.0 of the goal. These say whether a
 search has anything to work with (the measurements live in fmctd_dist.evaluation.plan_quality,
-shared with jobs/bench_recipe.py). Cube models get their own table
+shared with jobs/bench/bench_recipe.py). Cube models get their own table
 (fmctd_dist.evaluation.cube_quality: unguided plans from 100 validation starts beside the data's
 own windows). Throughput: guided DDIM transitions per second.
 """
@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from fmctd_dist.cli import run
 from fmctd_dist.config import REPO_ROOT, Config, apply_override, config_from_dict, validate
 from fmctd_dist.denoiser.runtime import option_settings
 from fmctd_dist.diffusion.model import DFTransformer
@@ -283,4 +284,4 @@ def main(argv: list[str]) -> None:
 
 
 if __name__ == "__main__":
-    main(sys.argv[1:])
+    run(main)

@@ -10,6 +10,7 @@
 # LIMIT is the per-episode planning-time limit (eval.episode_time_limit, s): a timed-out episode
 # counts as a failure and is marked in the table.
 set -euo pipefail
+if [[ "${1:-}" == -h || "${1:-}" == --help ]]; then sed -n "2,10p" "$0" | sed "s/^# \{0,1\}//"; exit 0; fi
 cd "$(dirname "$0")/.."
 SEEDS="${SEEDS:-[0,1,2,3,4,5,6,7,8,9]}"
 LIMIT="${LIMIT:-300}"

@@ -110,12 +110,21 @@ def claim_ray_worker(run_dir: Path, worker: str) -> None:
                                "scheduler did not apply (tests/conftest.py, pytest_xdist_make_scheduler)") from None
 
 
+def job_path(name: str) -> Path:
+    """jobs/<name>.py, or jobs/<folder>/<name>.py for the benchmarks, figures, probes and GPU tools."""
+    found = sorted(JOBS.glob(f"{name}.py")) + sorted(JOBS.glob(f"*/{name}.py"))
+    if not found:
+        raise FileNotFoundError(f"no job script {name}.py under {JOBS}")
+    return found[0]
+
+
 def load_job(name: str) -> ModuleType:
-    """A script under jobs/ (not a package) imported as a module, so tests call its functions. Its folder
-    goes on sys.path, as when Python runs it, so its imports of sibling scripts (cli_words) resolve."""
-    if str(JOBS) not in sys.path:
-        sys.path.insert(0, str(JOBS))
-    spec = importlib.util.spec_from_file_location(name, JOBS / f"{name}.py")
+    """A script under jobs/ or one of its folders (not a package) imported as a module, so tests call its
+    functions. Its folder goes on sys.path, as when Python runs it, so its imports of sibling scripts resolve."""
+    path = job_path(name)
+    if str(path.parent) not in sys.path:
+        sys.path.insert(0, str(path.parent))
+    spec = importlib.util.spec_from_file_location(name, path)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module

@@ -328,7 +328,7 @@ def test_cube_plan_rules_on_hand_made_plans():
 
 
 def test_quality_curve_job_on_cube_snapshots(tiny_cube, tmp_path, capsys):
-    """jobs/quality_curve.py measures each snapshot once (cached by digest) and draws the curve."""
+    """jobs/bench/quality_curve.py measures each snapshot once (cached by digest) and draws the curve."""
     from conftest import load_job
 
     from fmctd_dist.data.registry import load_family_dataset

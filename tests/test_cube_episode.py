@@ -435,7 +435,7 @@ def test_bench_speed_runs_cube_episodes_side_by_side(tiny_double, tmp_path):
 
 
 def test_probe_cube_grasp_prints_the_policy_steps_of_the_eval_episode(tiny_double, tmp_path):
-    """jobs/probe_cube_grasp.py runs the episode jobs/eval.py would (same row) and prints each policy step."""
+    """jobs/probes/probe_cube_grasp.py runs the episode jobs/eval.py would (same row) and prints each policy step."""
     import os
     import subprocess
     import sys
@@ -445,7 +445,7 @@ def test_probe_cube_grasp_prints_the_policy_steps_of_the_eval_episode(tiny_doubl
     words = ["method=fast-mctd-replan", *tiny_double, *SEARCH, "tasks=[1]", "seeds=[0]", "env.max_steps=100",
              "env.replan_every=10", "eval.threads=1"]
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
-    out = subprocess.run([sys.executable, "jobs/probe_cube_grasp.py", *words, "steps=0:3"], cwd=REPO_ROOT,
+    out = subprocess.run([sys.executable, "jobs/probes/probe_cube_grasp.py", *words, "steps=0:3"], cwd=REPO_ROOT,
                          capture_output=True, text=True, timeout=600, env=env)
     assert out.returncode == 0, out.stderr[-2000:]
     lines = out.stdout.splitlines()
@@ -454,13 +454,13 @@ def test_probe_cube_grasp_prints_the_policy_steps_of_the_eval_episode(tiny_doubl
     row = run_grid(["method=fast-mctd-replan", *tiny_double, *SEARCH], tmp_path, "local")[0]  # the eval episode
     outcome = "success" if row["success"] else f"failure ({row['why_failed']})"
     assert lines[-1].startswith(f"fast-mctd-replan cube-double task 1 seed 0: {outcome} after {row['env_steps']} steps")
-    bad = subprocess.run([sys.executable, "jobs/probe_cube_grasp.py", *words, "steps=x"], cwd=REPO_ROOT,
+    bad = subprocess.run([sys.executable, "jobs/probes/probe_cube_grasp.py", *words, "steps=x"], cwd=REPO_ROOT,
                          capture_output=True, text=True, timeout=300, env=env)
     assert bad.returncode == 2 and "steps='x' is not A:B" in bad.stderr
 
 
 def test_ideal_plans_job_smoke(tiny_double, tmp_path):
-    """jobs/cube_ideal_plans.py (arc plans instead of a model) runs the cube episode with the given policy."""
+    """jobs/probes/cube_ideal_plans.py (arc plans instead of a model) runs the cube episode with the given policy."""
     import os
     import subprocess
     import sys
@@ -468,7 +468,7 @@ def test_ideal_plans_job_smoke(tiny_double, tmp_path):
     from fmctd_dist.config import REPO_ROOT
 
     policy = next(a for a in tiny_double if a.startswith("env.policy="))
-    out = subprocess.run([sys.executable, "jobs/cube_ideal_plans.py", "env=cube-double", policy, "tasks=[1]",
+    out = subprocess.run([sys.executable, "jobs/probes/cube_ideal_plans.py", "env=cube-double", policy, "tasks=[1]",
                           "seeds=[0]", "env.max_steps=60", "env.horizon=50", "data.train_window=50"], cwd=REPO_ROOT,
                          capture_output=True, text=True, timeout=300, env={**os.environ, "OMP_NUM_THREADS": "1"})
     assert out.returncode == 0, out.stderr[-2000:]

@@ -1,4 +1,4 @@
-"""jobs/why_failed.py on cube rows (issue 20): a line per failed episode and the reasons counted per method."""
+"""jobs/probes/why_failed.py on cube rows (issue 20): a line per failed episode and the reasons counted per method."""
 
 from __future__ import annotations
 
@@ -62,7 +62,7 @@ def test_why_failed_job_reads_a_whole_cube_run(tmp_path):
     store = ResultStore(tmp_path, "cube-run")
     for r in fixture_rows():
         store.write(r)
-    out = subprocess.run([sys.executable, "jobs/why_failed.py", str(tmp_path / "cube-run")], cwd=REPO_ROOT,
+    out = subprocess.run([sys.executable, "jobs/probes/why_failed.py", str(tmp_path / "cube-run")], cwd=REPO_ROOT,
                          capture_output=True, text=True, timeout=120, env={**os.environ, "OMP_NUM_THREADS": "1"})
     assert out.returncode == 0, out.stderr
     assert "fast-mctd-replan/cube-single: 1 of 2 episodes failed" in out.stdout
@@ -73,6 +73,6 @@ def test_why_failed_job_reads_a_whole_cube_run(tmp_path):
 
 
 def test_why_failed_job_names_a_dir_without_rows(tmp_path):
-    out = subprocess.run([sys.executable, "jobs/why_failed.py", str(tmp_path)], cwd=REPO_ROOT, capture_output=True,
+    out = subprocess.run([sys.executable, "jobs/probes/why_failed.py", str(tmp_path)], cwd=REPO_ROOT, capture_output=True,
                          text=True, timeout=120)
     assert out.returncode == 2 and "has no task=*/seed=*.parquet rows" in out.stderr and "Traceback" not in out.stderr

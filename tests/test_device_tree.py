@@ -1,4 +1,4 @@
-"""jobs/device_tree.py: what a device run sends, and slim / restore leaving checkpoints/ behind."""
+"""jobs/gpu/device_tree.py: what a device run sends, and slim / restore leaving checkpoints/ behind."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "jobs"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "jobs" / "gpu"))
 import device_tree as dt  # noqa: E402
 
 

@@ -1,4 +1,4 @@
-"""jobs/gpu_train.py --dry-run: the prepared GPU training script keeps working on CPU (tiny data and model)."""
+"""jobs/gpu/gpu_train.py --dry-run: the prepared GPU training script keeps working on CPU (tiny data and model)."""
 
 from __future__ import annotations
 
@@ -12,15 +12,15 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(REPO / "jobs"))
+sys.path.insert(0, str(REPO / "jobs" / "gpu"))
 
-from cli_words import merge  # noqa: E402  (job scripts, not package modules)
+from fmctd_dist.cli_words import merge  # noqa: E402
 from gpu_train import MAX_TARS, SETS, VISUAL_START, XY_START, pack_all  # noqa: E402
 
 
 def test_gpu_train_dry_run_packs_one_tar_per_model(tmp_path):
     out = tmp_path / "out"
-    cmd = [sys.executable, "jobs/gpu_train.py", str(out), "--dry-run", "--runs", str(tmp_path / "runs")]
+    cmd = [sys.executable, "jobs/gpu/gpu_train.py", str(out), "--dry-run", "--runs", str(tmp_path / "runs")]
     done = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=600,
                           env={**os.environ, "OMP_NUM_THREADS": "1"})
     assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
@@ -57,7 +57,7 @@ def test_merge_keeps_the_last_value_of_each_key():
 def test_ant_set_dry_run_makes_its_data_with_workers_and_fine_tunes(tmp_path):
     """The ant set's chain on CPU: the tiny ant dataset made by 2 worker processes, one model packed."""
     out = tmp_path / "out"
-    cmd = [sys.executable, "jobs/gpu_train.py", str(out), "--dry-run", "--set", "ant", "--only", "antmaze-medium-h5",
+    cmd = [sys.executable, "jobs/gpu/gpu_train.py", str(out), "--dry-run", "--set", "ant", "--only", "antmaze-medium-h5",
            "--data-workers", "2", "--runs", str(tmp_path / "runs")]
     done = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=600,
                           env={**os.environ, "OMP_NUM_THREADS": "1"})
@@ -94,7 +94,7 @@ def test_visual_set_dry_run_trains_on_a_carried_store_without_making_data(tmp_pa
     """The visual chain makes no dataset (the store is carried) and trains on the latents; the words after
     the options (here the 20-episode store and the repo's data root) override the set's."""
     out = tmp_path / "out"
-    cmd = [sys.executable, "jobs/gpu_train.py", str(out), "--dry-run", "--set", "visual-latent", "--only",
+    cmd = [sys.executable, "jobs/gpu/gpu_train.py", str(out), "--dry-run", "--set", "visual-latent", "--only",
            "visual-pointmaze-medium-h5", "--runs", str(tmp_path / "runs"), "visual.episodes=20",
            f"data.root={REPO / 'data'}"]
     done = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=600,
@@ -168,7 +168,7 @@ def test_pack_all_keeps_one_tar_per_model_up_to_seven_then_shares_tars(tmp_path)
 
 
 def test_sets_join_with_commas_and_an_unknown_set_is_named(tmp_path):
-    cmd = [sys.executable, "jobs/gpu_train.py", str(tmp_path / "out"), "--set", "ant,visual,nope", "--dry-run"]
+    cmd = [sys.executable, "jobs/gpu/gpu_train.py", str(tmp_path / "out"), "--set", "ant,visual,nope", "--dry-run"]
     done = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=60)
     assert done.returncode != 0 and "no set nope" in done.stderr and not (tmp_path / "out").exists()
 
@@ -180,7 +180,7 @@ N100_LARGE = sorted((REPO / "data").glob("visual-pointmaze-large-latents-seed0-n
 def test_xy_set_dry_run_trains_a_plan_xy_model_on_the_carried_store(tmp_path):
     """What a lease runs for the visual maze: the [z, x, y] planner on the carried store, no data made."""
     out = tmp_path / "out"
-    cmd = [sys.executable, "jobs/gpu_train.py", str(out), "--dry-run", "--set", "ant,visual", "--only",
+    cmd = [sys.executable, "jobs/gpu/gpu_train.py", str(out), "--dry-run", "--set", "ant,visual", "--only",
            "visual-pointmaze-large-h5-xy", "--runs", str(tmp_path / "runs"), f"data.root={REPO / 'data'}"]
     done = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=600,
                           env={**os.environ, "OMP_NUM_THREADS": "1"})
@@ -194,7 +194,7 @@ def test_xy_set_dry_run_trains_a_plan_xy_model_on_the_carried_store(tmp_path):
 def test_a_second_call_continues_each_model_from_the_first_calls_runs(tmp_path):
     """--continue-from: what a second call on the warm machine runs (each model from the last call's weights)."""
     runs = tmp_path / "runs"
-    first = [sys.executable, "jobs/gpu_train.py", str(tmp_path / "a"), "--dry-run", "--only", "pointmaze-medium-h5",
+    first = [sys.executable, "jobs/gpu/gpu_train.py", str(tmp_path / "a"), "--dry-run", "--only", "pointmaze-medium-h5",
              "--runs", str(runs)]
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
     assert subprocess.run(first, cwd=REPO, capture_output=True, timeout=600, env=env).returncode == 0

@@ -1,4 +1,4 @@
-"""jobs/quality_curve.py on a maze model: the plan-level numbers, their relations, the digest cache."""
+"""jobs/bench/quality_curve.py on a maze model: the plan-level numbers, their relations, the digest cache."""
 
 from __future__ import annotations
 

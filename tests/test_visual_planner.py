@@ -260,7 +260,7 @@ def test_fast_mctd_solves_task1_seed0_with_the_shipped_models():
 @needs_shipped
 @needs_latents
 def test_context_probe_prints_a_row_per_start_kind(monkeypatch, capsys):
-    """jobs/visual_context_probe.py on 2 validation starts and one reset start: one row each, steps in range."""
+    """jobs/probes/visual_context_probe.py on 2 validation starts and one reset start: one row each, steps in range."""
     from conftest import load_job
 
     probe = load_job("visual_context_probe")
@@ -298,7 +298,7 @@ def test_context_probe_plans_on_the_maze_and_jump_it_is_given(monkeypatch, words
 @needs_shipped
 @needs_latents
 def test_plan_quality_reports_warps_and_manifold_distance():
-    """jobs/visual_plan_quality.py's measure on a small search: shapes and ranges of every statistic."""
+    """jobs/probes/visual_plan_quality.py's measure on a small search: shapes and ranges of every statistic."""
     from fmctd_dist.visual.plan_quality import nearest_distance, plan_quality
 
     assert nearest_distance(np.array([[0.0, 0.0], [3.0, 4.0]]), np.array([[0.0, 1.0], [3.0, 0.0]])).tolist() == [1, 4]
@@ -314,20 +314,20 @@ def test_plan_quality_reports_warps_and_manifold_distance():
 
 @needs_shipped
 def test_ideal_latent_plans_solve_task3_through_the_visual_episode():
-    """jobs/visual_ideal_plans.py: the encoded BFS path as the plan, run by the unchanged visual episode (chase
+    """jobs/probes/visual_ideal_plans.py: the encoded BFS path as the plan, run by the unchanged visual episode (chase
     frames, VAE, inverse dynamics): the episode and controller can solve a task when the latents are real ones."""
     import os
     import subprocess
     import sys
 
-    out = subprocess.run([sys.executable, "jobs/visual_ideal_plans.py", f"env={MEDIUM}", "tasks=[3]"], cwd=REPO_ROOT,
+    out = subprocess.run([sys.executable, "jobs/probes/visual_ideal_plans.py", f"env={MEDIUM}", "tasks=[3]"], cwd=REPO_ROOT,
                          capture_output=True, text=True, timeout=600, env={**os.environ, "OMP_NUM_THREADS": "1"})
     assert out.returncode == 0, out.stderr[-2000:]
     assert "task 3 seed 0: success" in out.stdout and "jump=5: 1/1 solved" in out.stdout
 
 
 def test_latent_aliasing_probe_tells_a_faithful_latent_space_from_an_aliased_one():
-    """jobs/visual_latent_aliasing.py: latents equal to positions keep far places far (0%); latents that wrap
+    """jobs/probes/visual_latent_aliasing.py: latents equal to positions keep far places far (0%); latents that wrap
     every 5 units put a far place within one step (near 100%)."""
     from conftest import load_job
 

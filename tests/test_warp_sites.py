@@ -1,4 +1,4 @@
-"""jobs/warp_sites.py: where plans warp (first step, later boundaries, inside tokens)."""
+"""jobs/probes/warp_sites.py: where plans warp (first step, later boundaries, inside tokens)."""
 
 from __future__ import annotations
 

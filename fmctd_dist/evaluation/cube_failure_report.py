@@ -1,4 +1,4 @@
-"""Cube failures as text: one line per failed episode and the reasons counted per method (jobs/why_failed.py).
+"""Cube failures as text: one line per failed episode and the reasons counted per method (jobs/probes/why_failed.py).
 
 The reason itself is decided when the episode ends (:func:`cube_failures.why_failed`, stored in the
 row). Here a failed row is read against its goal so a reader can tell the planner's part from the

@@ -1,6 +1,6 @@
 """Why an episode failed, from its result row: the first plan against the maze, the trajectory against the goal.
 
-Used by ``jobs/why_failed.py``. The authors' value function checks warps and reaching only, so a
+Used by ``jobs/probes/why_failed.py``. The authors' value function checks warps and reaching only, so a
 plan may cut through a wall and still win the search; and an ant that falls never gets up.
 """
 

@@ -1,7 +1,7 @@
 """Plan quality of a checkpoint without a search: what a planner has to work with.
 
 Two measurements, shared by jobs/bench_denoiser.py (docs/results.md section 4) and
-jobs/bench_recipe.py (the recipe bench, issue 17):
+jobs/bench/bench_recipe.py (the recipe bench, issue 17):
 
 - :func:`plan_quality`: 100 unguided and 100 guided plans (20 per task start, the full
   schedule = plain Diffusion Forcing sampling; Diffuser: all tokens together, start

@@ -1,6 +1,6 @@
 """Steps the noisy oracle needs to reach each evaluation goal (a sanity check on env + oracle).
 
-    python jobs/bench_oracle.py            # all mazes, tasks 1-5, noise 0.5 and 0, seed 0
+    python jobs/bench/bench_oracle.py            # all mazes, tasks 1-5, noise 0.5 and 0, seed 0
 
 Prints a Markdown table; the paper's budgets are 500/500/1000 env steps.
 """
@@ -9,6 +9,7 @@ import sys
 
 import numpy as np
 
+from fmctd_dist.cli import run
 from fmctd_dist.data.oracle import NoisyOracle
 from fmctd_dist.envs import make_env
 
@@ -41,4 +42,4 @@ def main(seeds: list[int]) -> None:
 
 
 if __name__ == "__main__":
-    main([int(s) for s in sys.argv[1:]] or [0])
+    run(lambda argv: main([int(s) for s in argv] or [0]))

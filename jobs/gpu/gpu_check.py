@@ -1,9 +1,9 @@
 """The speed check for a session lent a CUDA GPU (issue 22): throughput per option, then plans.
 
-    python3 jobs/gpu_check.py OUT_DIR              # on the H200 device machine (< 8 minutes)
-    python3 jobs/gpu_check.py OUT_DIR --dry-run    # CPU, tiny sizes, about a minute (tested)
+    python3 jobs/gpu/gpu_check.py OUT_DIR              # on the H200 device machine (< 8 minutes)
+    python3 jobs/gpu/gpu_check.py OUT_DIR --dry-run    # CPU, tiny sizes, about a minute (tested)
 
-1. install: as jobs/gpu_train.py (the project on PYTHONPATH, carried wheels from ``.whl/``).
+1. install: as jobs/gpu/gpu_train.py (the project on PYTHONPATH, carried wheels from ``.whl/``).
 2. ``OUT_DIR/throughput.md``: ``jobs/bench_denoiser.py --throughput`` on device=cuda, batches
    1 / 25 / 200 / 1000, tokens 11 / 21 / 51 / 101, options fp32 and bf16, with utilisation against
    the GPU's measured matmul peak; ``OUT_DIR/compiled.md``: the compiled options beside fp32 at 21

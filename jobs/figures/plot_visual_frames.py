@@ -1,6 +1,6 @@
 """Figure: chase-camera frames along a path through the visual maze, next to the maze.
 
-    python jobs/plot_visual_frames.py                      # -> docs/figures/visual_frames.png
+    python jobs/figures/plot_visual_frames.py                      # -> docs/figures/visual_frames.png
 
 For task 1 of medium and large, the BFS cell path from start to goal (cell centres joined by
 straight lines), six frames at evenly spaced points of it, rendered as the env renders them

@@ -1,6 +1,6 @@
 """Probe: does a position estimator trained with latent noise read a visual planner's plans more smoothly?
 
-    python jobs/visual_estimator_noise.py                      # visual-pointmaze-medium, the shipped planner
+    python jobs/probes/visual_estimator_noise.py                      # visual-pointmaze-medium, the shipped planner
 
 The value and the guidance read latent plans through the position estimator, which saw only real
 latents. If the plans' 9-11 unit jumps (docs/results.md 13.4) were the estimator extrapolating off

@@ -1,10 +1,10 @@
 """Visual maze episodes with ideal latent plans instead of a model: is the failure the planner's or the controller's?
 
-    python jobs/visual_ideal_plans.py env=visual-pointmaze-medium               # tasks 1-5, seed 0
-    python jobs/visual_ideal_plans.py env=visual-pointmaze-medium jump=1 tasks=[1]
+    python jobs/probes/visual_ideal_plans.py env=visual-pointmaze-medium               # tasks 1-5, seed 0
+    python jobs/probes/visual_ideal_plans.py env=visual-pointmaze-medium jump=1 tasks=[1]
 
 The "plan" of each call is the BFS cell path from the task's start cell to its goal cell at the
-point's speed (0.2 per step, as ``jobs/plot_visual_frames.py`` draws it), rendered and encoded by
+point's speed (0.2 per step, as ``jobs/figures/plot_visual_frames.py`` draws it), rendered and encoded by
 the VAE: on the latent manifold by construction. It is cut every ``jump`` steps and held ``jump``
 steps per frame, as a sparse plan is, then run by the visual episode (chase-camera frames, VAE,
 inverse dynamics toward the latents, ``evaluation/visual_episode.py``) with nothing else changed.

@@ -2,7 +2,7 @@
 compare what a planner gets from each, side by side. A recipe is chosen from this table,
 never from validation loss alone.
 
-    OMP_NUM_THREADS=1 python jobs/bench_recipe.py --tag h5 --budget-s 600 \\
+    OMP_NUM_THREADS=1 python jobs/bench/bench_recipe.py --tag h5 --budget-s 600 \\
         --arm base: --arm v:model.param=v --arm cos:train.lr_schedule=cosine \\
         --arm "v_net@v:diffusion.guidance_path=network" \\
         env=pointmaze-medium jump=5 train.warmup=250
@@ -36,10 +36,10 @@ from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
-from cli_words import merge  # same folder
+from fmctd_dist.cli_words import merge
 from tqdm import tqdm
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 NAME = re.compile(r"^[A-Za-z0-9_.+-]+$")
 PRECISION_T = 19  # the lowest-noise timestep of the precision probe (2% of 1000): the last DDIM level
 RUN_FOREVER = "train.max_steps=1000000"  # arms stop on their wall-clock budget, not a step count
@@ -47,7 +47,7 @@ SECTION = "### Recipe bench (issue 17)"
 INTRO = ("Arms trained from the same seed for the same time budget (`train.time_budget_s`, one core each; "
          "with `train.budget_clock=cpu` the budget counts the training process's CPU seconds, which stays fair "
          "when other jobs share the machine), "
-         "then measured side by side: `python jobs/bench_recipe.py` (the exact command above each table). "
+         "then measured side by side: `python jobs/bench/bench_recipe.py` (the exact command above each table). "
          "samples/s = steps x batch / recorded training wall time; x0 error and steps at timestep 19 "
          "(the last DDIM level) on 64 validation windows; plan quality from 100 unguided and 100 guided "
          "full-pyramid plans (section 4's measurement); Fast-MCTD on the listed grid, runner=local, one thread; "
@@ -260,7 +260,7 @@ def main(argv: list[str]) -> int:
     for a in arms.values():
         if a.base and (a.base not in arms or order.index(a.base) > order.index(a.name) or arms[a.base].base):
             raise SystemExit(f"error: --arm {a.name}@{a.base}: {a.base!r} must be a trained arm given before it")
-    command = "OMP_NUM_THREADS=1 python jobs/bench_recipe.py " + shlex.join(argv)
+    command = "OMP_NUM_THREADS=1 python jobs/bench/bench_recipe.py " + shlex.join(argv)
     print(f"{len(arms)} arms, {args.budget_s:.0f}s of training each, {args.parallel} at a time: {command}", flush=True)
     t0 = time.time()
     rows: dict[str, dict[str, Any]] = {}

@@ -1,7 +1,7 @@
 """Cube episodes with hand-made ideal plans: how far the arm's scripts + the cube policy get without a model.
 
-    python jobs/cube_ideal_plans.py env=cube-single
-    python jobs/cube_ideal_plans.py env=cube-double tasks=[1,2,3,4,5] seeds=[0,1]
+    python jobs/probes/cube_ideal_plans.py env=cube-single
+    python jobs/probes/cube_ideal_plans.py env=cube-double tasks=[1,2,3,4,5] seeds=[0,1]
 
 The planner is replaced by an arc: the first cube the value's rules call unsolved goes from
 where it is to its goal in 60 env steps after a 20-step hold (for the grasp), lifted by
@@ -48,7 +48,7 @@ class ArcPlanner:
 
 def main(argv: list[str]) -> int:
     cfg = load_config(argv, env="cube-single", method="fast-mctd-replan")
-    require_family(cfg.env.name, ("cube",), "jobs/cube_ideal_plans.py")
+    require_family(cfg.env.name, ("cube",), "jobs/probes/cube_ideal_plans.py")
     policy = load_policy(policy_dir(cfg), cfg.env.name)
     env = CubeEpisodes(cfg.env.name)
     print(f"{cfg.env.name}: policy {policy_dir(cfg)} (digest {policy.manifest.get('digest')}), "

@@ -1,7 +1,7 @@
 """Rendering speed of the visual maze: frames/s in one process on one thread, side by side.
 
-    python jobs/bench_render.py env=visual-pointmaze-medium            # 300 frames per arm
-    python jobs/bench_render.py env=visual-pointmaze-large frames=100
+    python jobs/bench/bench_render.py env=visual-pointmaze-medium            # 300 frames per arm
+    python jobs/bench/bench_render.py env=visual-pointmaze-large frames=100
 
 Arms: the chase camera (the task's view) and OGBench's fixed top-down view, each with MuJoCo's
 default 4096 shadow map (the reference frames) and a 1024 one (visual.shadowsize=1024). Arms

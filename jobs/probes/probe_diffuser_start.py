@@ -1,6 +1,6 @@
 """How much does a Diffuser checkpoint use its inpainted start? (issue 7; docs/results.md section 3.1)
 
-    python jobs/probe_diffuser_start.py checkpoints/pointmaze-medium-diffuser [key=value ...]
+    python jobs/probes/probe_diffuser_start.py checkpoints/pointmaze-medium-diffuser [key=value ...]
 
 Feeds 16 validation windows noised to timestep k (plan frames noisy, start clean, exactly as in
 training) and prints, in world units: the x0 error at plan frame 1, frame 2, mid-plan and the last
@@ -8,15 +8,20 @@ frame, and how far the frame-1 prediction moves when the start is swapped for an
 A model that uses the start has a small frame-1 error and moves frame 1 with the start. Then plans
 one guided plan per task and noise seed 0-2 and prints its first step and largest later step.
 """
-import sys, numpy as np, torch
+import sys
+
+from fmctd_dist.cli import print_usage, wants_help
+
+if len(sys.argv) < 2 or wants_help(sys.argv[1:]):
+    print_usage()
+    sys.exit(0 if len(sys.argv) >= 2 else 2)
+import numpy as np, torch  # noqa: E401,E402
 from fmctd_dist.config import load_config
 from fmctd_dist.diffusion.checkpoint import load_checkpoint
 from fmctd_dist.data.dataset import load_dataset
 from fmctd_dist.data.windows import train_data
 from fmctd_dist.diffusion.train import DiffuserLoss
 torch.set_num_threads(1)
-if len(sys.argv) < 2:
-    sys.exit(__doc__)
 ck = sys.argv[1]
 cfg = load_config(["method=diffuser", "env=pointmaze-medium", f"checkpoint={ck}"] + sys.argv[2:])
 model, manifest = load_checkpoint(cfg.checkpoint_dir(), cfg); model.eval()

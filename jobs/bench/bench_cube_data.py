@@ -1,7 +1,7 @@
 """How fast the cube play data is made: env steps/s of OGBench's CubePlanOracle loop, per cube env.
 
-    python jobs/bench_cube_data.py                       # 2 episodes x 1001 steps per env
-    python jobs/bench_cube_data.py --episodes 4 --envs cube-triple
+    python jobs/bench/bench_cube_data.py                       # 2 episodes x 1001 steps per env
+    python jobs/bench/bench_cube_data.py --episodes 4 --envs cube-triple
 
 Reports steps per CPU second of this process (what one free core would do; the machine may be
 shared) beside steps per wall second, and what OGBench's full sizes would take on one core.

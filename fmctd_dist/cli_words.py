@@ -1,4 +1,4 @@
-"""key=value command-line words shared by the job scripts (standard library only: jobs/gpu_train.py
+"""key=value command-line words shared by the job scripts (standard library only: jobs/gpu/gpu_train.py
 imports it before the project is installed)."""
 
 from __future__ import annotations

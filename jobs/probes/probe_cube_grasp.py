@@ -1,7 +1,7 @@
 """Step by step through one cube episode's carry: where does the gripper lose the cube?
 
-    python jobs/probe_cube_grasp.py method=p-mctd-replan env=cube-single tasks=[4] seeds=[1]
-    python jobs/probe_cube_grasp.py method=fast-mctd-replan env=cube-single tasks=[4] seeds=[1] steps=8:45
+    python jobs/probes/probe_cube_grasp.py method=p-mctd-replan env=cube-single tasks=[4] seeds=[1]
+    python jobs/probes/probe_cube_grasp.py method=fast-mctd-replan env=cube-single tasks=[4] seeds=[1] steps=8:45
 
 Runs the episode in process exactly as jobs/eval.py does (same plans, same row) while recording what
 the low-level policy saw and did at each of its steps: the gripper opening and contact flag of the

@@ -1,8 +1,8 @@
 """Probe: does the VAE's latent space keep distant places apart, at the scale of one frame's step?
 
-    python jobs/visual_latent_aliasing.py visual.episodes=100                       # medium, the shipped H=5 model
-    python jobs/visual_latent_aliasing.py env=visual-pointmaze-large visual.episodes=100
-    python jobs/visual_latent_aliasing.py visual.episodes=100 jump=1 checkpoint=runs/visual/s29-h1-e100-bw3-cos
+    python jobs/probes/visual_latent_aliasing.py visual.episodes=100                       # medium, the shipped H=5 model
+    python jobs/probes/visual_latent_aliasing.py env=visual-pointmaze-large visual.episodes=100
+    python jobs/probes/visual_latent_aliasing.py visual.episodes=100 jump=1 checkpoint=runs/visual/s29-h1-e100-bw3-cos
 
 The latent planner learns the step statistics of real latent paths in normalised latent units
 (the units of its loss). If two real frames far apart in the maze lie closer in latent space than

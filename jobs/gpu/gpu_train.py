@@ -1,13 +1,13 @@
 """Train maze models on one CUDA GPU at the paper's batch, all concurrently, to one deadline.
 
-    python3 jobs/gpu_train.py OUT_DIR                           # the H200 device: --set campaign, ~8.5 min
-    python3 jobs/gpu_train.py OUT_DIR --set scratch             # the three sparse models from scratch (paper recipe)
-    python3 jobs/gpu_train.py OUT_DIR --set ant                 # the six AntMaze models from the dense ant ones
-    python3 jobs/gpu_train.py OUT_DIR --set visual              # the four [z, x, y] visual planners (carried stores)
-    python3 jobs/gpu_train.py OUT_DIR --set ant,visual          # both sets at once (10 models in 5 tars)
-    python3 jobs/gpu_train.py OUT_DIR --train-until-s 300 train.precision=bf16   # extra words go to every run
-    python3 jobs/gpu_train.py OUT_DIR --dry-run                 # CPU: tiny data and model, seconds (tested)
-    python3 jobs/gpu_train.py OUT_DIR --set ant --only antmaze-giant-h5 --runs runs/gpu2 --continue-from runs/gpu
+    python3 jobs/gpu/gpu_train.py OUT_DIR                           # the H200 device: --set campaign, ~8.5 min
+    python3 jobs/gpu/gpu_train.py OUT_DIR --set scratch             # the three sparse models from scratch (paper recipe)
+    python3 jobs/gpu/gpu_train.py OUT_DIR --set ant                 # the six AntMaze models from the dense ant ones
+    python3 jobs/gpu/gpu_train.py OUT_DIR --set visual              # the four [z, x, y] visual planners (carried stores)
+    python3 jobs/gpu/gpu_train.py OUT_DIR --set ant,visual          # both sets at once (10 models in 5 tars)
+    python3 jobs/gpu/gpu_train.py OUT_DIR --train-until-s 300 train.precision=bf16   # extra words go to every run
+    python3 jobs/gpu/gpu_train.py OUT_DIR --dry-run                 # CPU: tiny data and model, seconds (tested)
+    python3 jobs/gpu/gpu_train.py OUT_DIR --set ant --only antmaze-giant-h5 --runs runs/gpu2 --continue-from runs/gpu
                                                                 # a second call on the warm machine (below)
 
 Made for a session lent the ``device`` tool's H200 (15 minutes in all, the machine's start
@@ -41,7 +41,7 @@ is importable:
    A run that outlives the deadline by --grace-s is killed and its last checkpoint is packed.
 5. a second call, while the machine is still warm (it goes back 30 s after a call): runs/, data/
    and the wheels installed in /tmp/site are still there, but checkpoints/ (left behind by
-   ``jobs/device_tree.py slim``) and every carried path the call does not name again are gone.
+   ``jobs/gpu/device_tree.py slim``) and every carried path the call does not name again are gone.
    So carry again what the datasets' check needs (the ant set: checkpoints/ant-expert) and
    continue each model from the first call's weights with ``--continue-from runs/gpu``
    (session 33 did this by hand: docs/results.md section 4, "Session 33").
@@ -60,9 +60,10 @@ import threading
 import time
 from pathlib import Path
 
-from cli_words import merge  # same folder, standard library only
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(REPO))  # the project's own folder: importable before it is installed
+from fmctd_dist.cli_words import merge  # noqa: E402  standard library only, like this script until install()
 ENVS = ("pointmaze-medium", "pointmaze-large", "pointmaze-giant")
 NEEDED = ("omegaconf", "tqdm", "numpy", "torch")  # what jobs/train.py imports beyond the standard library
 FOR_DATA = ("mujoco", "gymnasium", "ogbench", "glfw")  # jobs/make_dataset.py's too (gymnasium's MuJoCo imports glfw)
@@ -153,7 +154,7 @@ def install(env: dict[str, str]) -> dict[str, str]:
     if wheels and _missing(NEEDED + FOR_DATA, {**env, "PYTHONPATH": str(REPO)}):  # else the machine has them
         subprocess.run([sys.executable, "-m", "pip", "install", "-q", "--no-index", "--no-deps", "--no-compile",
                         "--no-build-isolation", "--upgrade", "--target", str(SITE), *map(str, wheels)], check=True)
-        (SITE / MARK).write_text("installed by jobs/gpu_train.py\n")
+        (SITE / MARK).write_text("installed by jobs/gpu/gpu_train.py\n")
     if (SITE / MARK).exists():  # ours, from this call or an earlier one on the same machine
         paths.append(str(SITE))
     env = {**env, "PYTHONPATH": os.pathsep.join(paths + [p for p in [env.get("PYTHONPATH")] if p])}

@@ -1,6 +1,6 @@
 """Figure: a visual planner's first plan as images (decoded latents) beside the path the robot took.
 
-    python jobs/plot_visual_plan.py env=visual-pointmaze-medium env.warp_sparse=8.0 tasks=[2] seeds=[0]
+    python jobs/figures/plot_visual_plan.py env=visual-pointmaze-medium env.warp_sparse=8.0 tasks=[2] seeds=[0]
 
 Runs one episode (task and seed: the first of ``eval.tasks`` / ``eval.seeds``) with the configured
 method, in this process. Left: the maze with the first plan as the estimator reads it (numbered

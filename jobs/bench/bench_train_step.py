@@ -1,8 +1,8 @@
 """CPU seconds per training step, fp32 against bf16 autocast, on this machine (docs/results.md 6.3).
 
-    python jobs/bench_train_step.py                 # 6 x 128 model, 51 tokens x batch 128, one thread
-    python jobs/bench_train_step.py 11 256          # n_tokens, batch
-    python jobs/bench_train_step.py 11 256 compiled # also a torch.compile'd copy of the model (same init)
+    python jobs/bench/bench_train_step.py                 # 6 x 128 model, 51 tokens x batch 128, one thread
+    python jobs/bench/bench_train_step.py 11 256          # n_tokens, batch
+    python jobs/bench/bench_train_step.py 11 256 compiled # also a torch.compile'd copy of the model (same init)
 
 Whether bf16 pays depends on the CPU (native on avx512_bf16 / amx_bf16, emulated elsewhere), so
 measure before choosing ``train.precision``: fp32 runs first and last, so drift shows. ``compiled``
@@ -17,6 +17,7 @@ import time
 
 import torch
 
+from fmctd_dist.cli import run
 from fmctd_dist.device import NATIVE_BF16_FLAGS, cpu_flags
 from fmctd_dist.diffusion.model import DFTransformer
 
@@ -61,5 +62,4 @@ def main(n_tokens: int = 51, batch: int = 128, compiled: bool = False) -> None:
 
 
 if __name__ == "__main__":
-    args = sys.argv[1:]
-    main(*(int(a) for a in args if a != "compiled"), compiled="compiled" in args)
+    run(lambda args: main(*(int(a) for a in args if a != "compiled"), compiled="compiled" in args))

@@ -1,6 +1,6 @@
 """Quality against training time (issue 17): how much compute a model needs on this machine.
 
-    OMP_NUM_THREADS=1 python jobs/quality_curve.py runs/campaign/pointmaze-medium-h5 [--plot docs/figures/x.png]
+    OMP_NUM_THREADS=1 python jobs/bench/quality_curve.py runs/campaign/pointmaze-medium-h5 [--plot docs/figures/x.png]
 
 Measures every snapshot a run kept (``train.snapshot_every_s``, under <run>/snapshots/) and the
 run itself with the plan-level numbers of the denoiser-quality table (maze models: unguided and

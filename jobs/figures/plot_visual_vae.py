@@ -1,6 +1,6 @@
 """Figure: held-out chase-camera frames and their VAE reconstructions, with the estimator's position read from z.
 
-    python jobs/plot_visual_vae.py env=visual-pointmaze-medium     # -> docs/figures/visual_vae_<env>.png
+    python jobs/figures/plot_visual_vae.py env=visual-pointmaze-medium     # -> docs/figures/visual_vae_<env>.png
 
 Top row: validation frames (other episodes than the VAE's training frames), evenly spaced in the
 frame store; bottom row: decode(mu). Titles: true (x, y) and the position estimator's reading of

@@ -1,6 +1,6 @@
 """Where a maze model's plans warp (issue 17): the first step, token boundaries or inside tokens.
 
-    OMP_NUM_THREADS=1 python jobs/warp_sites.py checkpoints/pointmaze-large-h1 [more checkpoints]
+    OMP_NUM_THREADS=1 python jobs/probes/warp_sites.py checkpoints/pointmaze-large-h1 [more checkpoints]
 
 The value zeroes a plan with any step over the warp limit (0.75 + 0.25 H), and its first step is
 start -> first plan frame (reference.md §4). For each checkpoint, on the noise of the quality table
@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from fmctd_dist.cli import run
 from fmctd_dist.config import Config, config_from_dict
 from fmctd_dist.data.tokens import PlanCodec
 from fmctd_dist.denoiser.local import LocalDenoiser
@@ -121,4 +122,4 @@ def main(argv: list[str]) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main(sys.argv[1:]))
+    run(main)

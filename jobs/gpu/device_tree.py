@@ -1,13 +1,13 @@
 """What a ``device`` run would send, and how to send less: the shipped checkpoints stay behind.
 
-    python3 jobs/device_tree.py size              # bytes that travel (tracked + untracked-not-ignored) vs 64 MiB
-    python3 jobs/device_tree.py slim              # leave checkpoints/ behind: untrack it in the index, ignore it
-    python3 jobs/device_tree.py restore           # undo slim (index and .git/info/exclude); the files never move
+    python3 jobs/gpu/device_tree.py size              # bytes that travel (tracked + untracked-not-ignored) vs 64 MiB
+    python3 jobs/gpu/device_tree.py slim              # leave checkpoints/ behind: untrack it in the index, ignore it
+    python3 jobs/gpu/device_tree.py restore           # undo slim (index and .git/info/exclude); the files never move
 
 Why: the device tool sends the working tree (tracked files and untracked ones git does not
 ignore) and refuses more than 64 MiB. Our code and docs are ~2 MB, but the shipped checkpoints
 (~5 MB per 6 x 128 model, 25+ of them) are over 120 MB, so a session lent a GPU could not run
-``jobs/gpu_train.py`` or ``jobs/gpu_check.py`` at all. ``slim`` drops ``checkpoints/`` from the
+``jobs/gpu/gpu_train.py`` or ``jobs/gpu/gpu_check.py`` at all. ``slim`` drops ``checkpoints/`` from the
 index (``git rm -r --cached``: no file is deleted, nothing is committed) and lists it in
 ``.git/info/exclude``, so it neither counts as tracked nor as untracked-not-ignored; a checkpoint
 the command needs (gpu_check's ``checkpoints/pointmaze-giant-h5``) then travels through the
@@ -24,11 +24,11 @@ import subprocess
 import sys
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 LIMIT = 64 * 2**20  # the device tool's working-tree limit
 LEFT_BEHIND = "checkpoints"
 # two lines in .git/info/exclude (gitignore has no trailing comments): ours, and the pattern
-MARK = f"# jobs/device_tree.py slim (undo: python3 jobs/device_tree.py restore)\n/{LEFT_BEHIND}/"
+MARK = f"# jobs/gpu/device_tree.py slim (undo: python3 jobs/gpu/device_tree.py restore)\n/{LEFT_BEHIND}/"
 
 
 def git(repo: Path, *args: str) -> str:
@@ -51,7 +51,7 @@ def size_report(repo: Path) -> tuple[int, list[str]]:
     state = "slim (checkpoints/ left behind)" if is_slim(repo) else "full"
     lines = [f"travels: {total / 2**20:.1f} MiB of {LIMIT / 2**20:.0f} MiB allowed ({state}): "
              + ("fits" if total <= LIMIT
-                else f"too big; `python3 jobs/device_tree.py slim` leaves {LEFT_BEHIND}/ behind")]
+                else f"too big; `python3 jobs/gpu/device_tree.py slim` leaves {LEFT_BEHIND}/ behind")]
     lines += [f"  {b / 2**20:8.1f} MiB  {top}" for top, b in sorted(per_top.items(), key=lambda kv: -kv[1])[:8]]
     return total, lines
 

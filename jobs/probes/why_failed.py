@@ -1,8 +1,8 @@
 """Why episodes failed: one line per failed episode of a run, from its result rows.
 
-    python jobs/why_failed.py results/main/fast-mctd/antmaze-medium
-    python jobs/why_failed.py results/main/fast-mctd/pointmaze-giant results/main/s-mctd/pointmaze-giant
-    python jobs/why_failed.py results/cube-methods-s9          # a whole run: every <method>/<env> in it
+    python jobs/probes/why_failed.py results/main/fast-mctd/antmaze-medium
+    python jobs/probes/why_failed.py results/main/fast-mctd/pointmaze-giant results/main/s-mctd/pointmaze-giant
+    python jobs/probes/why_failed.py results/cube-methods-s9          # a whole run: every <method>/<env> in it
 
 Maze rows: how the search ended (plan_status; replanning methods: the count of plans),
 the first plan's length and end distance to the goal, the share of the path along it (10 points
