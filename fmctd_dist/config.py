@@ -144,7 +144,7 @@ class EnvConfig:
     max_steps: int = spec(500, gt=0, why="env steps of one episode (500 medium/large, 1000 giant)")
     horizon: int = spec(500, gt=0, why="planning horizon in env steps (500 medium/large, 1000 giant)")
     policy: str = ""  # antmaze: low-level policy dir ("" -> checkpoints/<env>-policy); unused for pointmaze
-    # cube envs (reference §13); 0 / [] = the method's setting (mazes leave them so)
+    # cube envs (docs/reference.md §13); 0 / [] = the method's setting (mazes leave them so)
     replan_every: int = spec(0, ge=0, why="env steps between replans for methods that replan; 0 = "
                                          "method.replan_every (cubes: 100 single, 200 double/triple)")
     warp_dense: float = spec(0.0, ge=0, why="cube value warp threshold at jump=1 (1.0), visual maze's on estimated "
@@ -575,7 +575,7 @@ def load_config(args: list[str] | None = None, *, env: str = "pointmaze-medium",
 # fields that existed once: a stored config (a manifest, a row) that holds one still loads, without it; a
 # command that sets one is told why it is gone
 RETIRED = {"eval.resume_mixed": "removed in session 26: a run directory never mixes configs or checkpoints "
-                                "(design 7); write to eval.run=<new name>, or move the old rows aside"}
+                                "(docs/design.md §10); write to eval.run=<new name>, or move the old rows aside"}
 
 
 def config_from_dict(d: dict[str, Any]) -> Config:

@@ -1,7 +1,7 @@
 """Device resolution: the config names the device, and a missing GPU is an error, never a fallback.
 
 A silent CPU fallback would make a "GPU" benchmark or evaluation quietly run on CPU
-(design §10), so ``cuda`` without a visible GPU raises :class:`DeviceError`.
+(docs/design.md §12), so ``cuda`` without a visible GPU raises :class:`DeviceError`.
 """
 
 from __future__ import annotations

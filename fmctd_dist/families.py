@@ -1,6 +1,6 @@
 """Env families: which env names exist, which family each belongs to, and what its planner models.
 
-A family (design item 12) is an env module + a data module + configs (+ value rules and a
+A family (docs/design.md §13) is an env module + a data module + configs (+ value rules and a
 controller): PointMaze (``envs/pointmaze.py``, ``data/dataset.py``), AntMaze (``envs/antmaze.py``,
 ``data/ant_dataset.py``), the robot-arm cubes (``envs/cube.py``, ``data/cube_dataset.py``) and the
 visual maze (``envs/visual_pointmaze.py``, ``data/visual_dataset.py`` over ``visual/``'s latent store).

@@ -129,7 +129,7 @@ def main() -> None:
     ray.init(address=cluster.address, logging_level="ERROR", log_to_driver=False)
     say("cluster up", cluster.address)
     report: dict = {"nodes": len(ray.nodes()), "startup_s": round(time.monotonic() - t_start, 1)}
-    t0 = time.monotonic()  # the fault-free reference: in process (no Ray), bitwise what Ray gives (design 4)
+    t0 = time.monotonic()  # the fault-free reference: in process (no Ray), bitwise what Ray gives (docs/design.md §7)
     from fmctd_dist.config import load_config
     from fmctd_dist.evaluation.grid import prepare, run_local
     from fmctd_dist.evaluation.results import ResultStore

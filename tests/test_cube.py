@@ -55,7 +55,7 @@ def test_obs_layout(episodes):
         cube_xyz(r.obs[:28], 2)
 
 
-# OGBench's task 1 of each env in obs units (reference.md §13), unpermuted: start, goal rows per cube.
+# OGBench's task 1 of each env in obs units (docs/reference.md §13), unpermuted: start, goal rows per cube.
 TASK1 = {
     "cube-single": ([[0, 1, 0.2]], [[0, -1, 0.2]]),
     "cube-double": ([[0, 0, 0.2], [0, -1, 0.2]], [[0, 0, 0.2], [0, 1, 0.2]]),

@@ -32,7 +32,7 @@ def test_paper_size_parameter_count():
     w, ff, d = 128, 512, 20
     per_layer = (w * 3 * w + 3 * w) + (w * w + w) + 2 * 2 * w + (w * ff + ff) + (ff * w + w)
     expected = (d + w // 2) * w + w + w * w + w + 12 * per_layer + w * d + d
-    assert m.num_params() == expected == 2_409_236  # reference.md: ~2.4M
+    assert m.num_params() == expected == 2_409_236  # docs/reference.md §5: ~2.4M
     assert len(m.blocks) == 12 and m.blocks[0].heads == 4 and m.token_dim == 20 and m.n_tokens == 51
 
 

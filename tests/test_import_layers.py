@@ -1,4 +1,4 @@
-"""The package's import graph has no cycle (design item 12: what families share sits below them).
+"""The package's import graph has no cycle (docs/design.md §2: what families share sits below them).
 
 Every ``import`` / ``from ... import`` of a ``fmctd_dist`` module counts, deferred ones inside
 functions too: a cycle hidden behind a deferred import is still a cycle for a reader. A

@@ -7,7 +7,7 @@ from fmctd_dist.envs import make_env, maze_geometry
 from fmctd_dist.envs.seeding import check_seed
 from fmctd_dist.errors import ConfigError
 
-# reference.md §9: (init_xy, goal_xy, BFS cell distance) per task
+# docs/reference.md §9: (init_xy, goal_xy, BFS cell distance) per task
 TASKS = {
     "pointmaze-medium": [((0, 0), (20, 20), 10), ((0, 20), (20, 0), 10), ((8, 16), (4, 12), 6),
                          ((16, 20), (0, 20), 10), ((20, 4), (0, 0), 8)],

@@ -1,6 +1,6 @@
 """Object-wise guidance (issue 20): a per-job mask over the frame's state dims decides which dims
 the goal term of the guidance sees. No mask and an all-ones mask are the same bits; a mask on
-cube 0 makes cube 1's goal irrelevant; masked jobs keep the micro-batch contract (design §4).
+cube 0 makes cube 1's goal irrelevant; masked jobs keep the micro-batch contract (docs/design.md §7).
 The Ray pool's sharding of masked batches is checked in test_ray_determinism.py."""
 
 from __future__ import annotations

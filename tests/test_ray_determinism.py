@@ -1,5 +1,5 @@
 """Contract: a plan is the same bits from LocalDenoiser, 1 Ray actor, 2 Ray actors, and when
-two trees share the pool at once (design §4-5). CPU, tiny checkpoint, real model outputs."""
+two trees share the pool at once (docs/design.md §7-8). CPU, tiny checkpoint, real model outputs."""
 
 from __future__ import annotations
 
@@ -95,7 +95,7 @@ def test_ray_denoiser_matches_local_bitwise(prepared, pools):
     got = pools(2).denoiser().denoise(batch)
     assert np.array_equal(got.x, want.x) and np.array_equal(got.x0, want.x0)
     assert got.retries == 0 and got.denoise_time_s > 0 and got.stats["micro_batches"] == 3
-    assert got.stats["calls"] == 2 and got.stats["actors_used"] == 2  # one segment per actor (design §5)
+    assert got.stats["calls"] == 2 and got.stats["actors_used"] == 2  # one segment per actor (docs/design.md §8)
 
 
 def test_ray_denoiser_matches_local_bitwise_when_the_ladder_renoises(prepared, pools):

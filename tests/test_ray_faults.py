@@ -1,4 +1,4 @@
-"""Faults (design §6): a denoiser actor killed mid-batch still gives the identical plan (retries
+"""Faults (docs/design.md §9): a denoiser actor killed mid-batch still gives the identical plan (retries
 counted); with restarts off and every actor dead, one clear DeviceError in bounded time; an episode
 past ray.episode_timeout_s is re-run, then one clear DeviceError, never a hang."""
 

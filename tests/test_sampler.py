@@ -306,7 +306,7 @@ def test_local_denoiser_same_micro_batch_is_bitwise_invariant_to_batch_size():
 
 def test_local_denoiser_different_micro_batch_sizes_agree():
     """Bitwise across M only where the BLAS picks the same kernels (measured: M >= 2 on this CPU);
-    the contract (design §4) is a fixed M, so only closeness is asserted here."""
+    the contract (docs/design.md §7) is a fixed M, so only closeness is asserted here."""
     batch = mixed_batch(seed=4)
     results = {m: LocalDenoiser(tiny_model(), CFG, micro_batch=m).denoise(batch) for m in (1, 2, 8)}
     for m in (1, 8):

@@ -1,4 +1,4 @@
-"""Exact values of the pyramid schedule and the row sets the tree search runs (reference.md §5-6)."""
+"""Exact values of the pyramid schedule and the row sets the tree search runs (docs/reference.md §5-6)."""
 
 from __future__ import annotations
 

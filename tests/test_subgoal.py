@@ -1,4 +1,4 @@
-"""AntMaze subgoal schedule (reference §7): 10 plan points ahead, advanced within 1.0, held at the end."""
+"""AntMaze subgoal schedule (docs/reference.md §7): 10 plan points ahead, advanced within 1.0, held at the end."""
 
 import numpy as np
 import pytest

@@ -1,6 +1,6 @@
 """Execute an x, y plan on the ant: a :class:`SubgoalTracker` picks the subgoal, a goal-conditioned policy walks to it.
 
-The authors' AntMaze controller (reference §7): the subgoal is the plan point 10 steps
+The authors' AntMaze controller (docs/reference.md §7): the subgoal is the plan point 10 steps
 ahead, moved 10 further each time the ant comes within 1.0 of it, held at the plan's last
 point; a low-level policy maps (ant state, subgoal) to torques. The policy is any callable
 ``(obs [29], subgoal [2]) -> torques [8]`` (:class:`fmctd_dist.control.policy.checkpoint.GoalPolicy`, or

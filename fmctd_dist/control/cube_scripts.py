@@ -1,4 +1,4 @@
-"""The arm's pre-defined plans between cube segments (reference §13), as scripted effector actions.
+"""The arm's pre-defined plans between cube segments (docs/reference.md §13), as scripted effector actions.
 
 The planner plans cube positions only; between two object segments the authors insert
 redundant, hand-written arm motions: before a new plan ~30 steps moving the open gripper

@@ -1,4 +1,4 @@
-"""PD waypoint controller for PointMaze (reference §7).
+"""PD waypoint controller for PointMaze (docs/reference.md §7).
 
 At env step t the target is waypoint t (the last one once the plan is exhausted):
 a = clip(kp (p_t - pos) + kd (v_plan - vel), -1, 1), v_plan = p_t - p_{t-1} (p_0 - pos at t=0).

@@ -1,6 +1,6 @@
 """AntMaze navigate data: our ant expert, steered by the BFS oracle, in OGBench's ant maze.
 
-OGBench's recipe (``generate_locomaze.py``, reference §9) with our own expert: the same goal
+OGBench's recipe (``generate_locomaze.py``, docs/reference.md §9) with our own expert: the same goal
 logic as PointMaze navigate (random start cell + noise, random vertex-cell goal, a new goal
 on each success, the episode runs on), and
 

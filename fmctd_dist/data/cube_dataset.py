@@ -1,7 +1,7 @@
 """Cube play datasets (OGBench ``cube-{single,double,triple}-play-v0``), regenerated offline.
 
 OGBench's ``data_gen_scripts/generate_manipspace.py`` is not in the pip package; this is its
-play loop rebuilt from reference.md §13 with the package's own ``CubeEnv`` and ``CubePlanOracle``:
+play loop rebuilt from docs/reference.md §13 with the package's own ``CubeEnv`` and ``CubePlanOracle``:
 - ``CubeEnv(mode='data_collection', terminate_at_goal=False)``: each reset puts the arm at a
   random pose, every cube at a random table spot with a random yaw, and picks a first target
   (``set_new_target`` with its default p_stack 0.5, as in OGBench);

@@ -1,6 +1,6 @@
 """What PointMaze and AntMaze navigate data share: OGBench's start / goal draws and the episode loop.
 
-OGBench's navigate recipe (reference §9): a random free cell's centre + uniform [-1, 1]
+OGBench's navigate recipe (docs/reference.md §9): a random free cell's centre + uniform [-1, 1]
 noise as the start, a random vertex cell as the goal, a new goal on each success, the
 episode runs on. The robot-specific step (oracle actions for the point, the expert for the
 ant) is the caller's: an ``EpisodeMaker`` builds the env (and expert) once per process and

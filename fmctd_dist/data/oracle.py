@@ -2,7 +2,7 @@
 
 Direction = unit vector from the agent to the centre of the neighbouring free cell with the
 smaller BFS distance to the goal cell (the goal itself once in the goal cell); action =
-direction + N(0, noise^2) per dimension, clipped to [-1, 1] (reference §9).
+direction + N(0, noise^2) per dimension, clipped to [-1, 1] (docs/reference.md §9).
 """
 
 from __future__ import annotations

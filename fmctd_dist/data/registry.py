@@ -1,6 +1,6 @@
 """Which data module serves an env family: the one place training jobs ask for a family's dataset.
 
-A family (design item 12) brings its own data module; each offers ``make(cfg) -> (dir, manifest)``
+A family (docs/design.md §13) brings its own data module; each offers ``make(cfg) -> (dir, manifest)``
 (generate if missing, verify if present) and ``load(cfg) -> dataset`` whose ``train`` / ``val``
 arrays [E, S, state_dim], ``normaliser`` and ``digest`` are all ``data/windows.py`` needs. The
 modules are imported on first use, so asking for the cube data never imports the maze code.

@@ -1,6 +1,6 @@
 """The visual maze's planner data: VAE latents (mu per frame) of the latent store, as trajectories.
 
-The Diffusion Forcing model of a visual maze plans 8-D latent trajectories (reference §14). Its
+The Diffusion Forcing model of a visual maze plans 8-D latent trajectories (docs/reference.md §14). Its
 training windows are cut from the latent store (``visual/latents.py``: every frame of a seeded
 subset of train episodes, rendered once and encoded by the VAE) exactly as a point maze's are cut
 from positions (``data/windows.py``, any jump H): only the frame state differs, [E, S, 8] here.

@@ -2,7 +2,7 @@
 
 Jobs are cut in job order into micro-batches of exactly ``micro_batch`` jobs (the last
 padded with copies of its last job), so every model call has the same shapes whatever the
-batch size, and a job's bits do not depend on how the tree owner batched it (design §4).
+batch size, and a job's bits do not depend on how the tree owner batched it (docs/design.md §7).
 The Ray actors wrap this same class, so one process and N actors run identical code.
 """
 

@@ -105,7 +105,7 @@ def concat_batches(batches: list[DenoiseBatch]) -> DenoiseBatch:
 def micro_batch_indices(size: int, micro_batch: int) -> list[np.ndarray]:
     """Job indices of each micro-batch: cut in job order into exactly ``micro_batch`` jobs, the
     last one padded with copies of its last job. Every denoiser (local or Ray) cuts this way, so
-    all model calls have the same shapes and a job's bits do not depend on who ran it (design §4)."""
+    all model calls have the same shapes and a job's bits do not depend on who ran it (docs/design.md §7)."""
     out = []
     for lo in range(0, size, micro_batch):
         idx = np.arange(lo, min(lo + micro_batch, size))

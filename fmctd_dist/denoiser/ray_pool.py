@@ -1,10 +1,10 @@
-"""RayDenoiser: the Denoiser protocol over a pool of ``DenoiserActor``s (design §3-6).
+"""RayDenoiser: the Denoiser protocol over a pool of ``DenoiserActor``s (docs/design.md §6-9).
 
 A batch is cut in job order into micro-batches of exactly M = ``ray.micro_batch`` jobs (the
 last one padded, :func:`micro_batch_indices`, the same cut as :class:`LocalDenoiser`), so
 every model call has the same shapes with 1 actor, N actors or no Ray, and plans are bitwise
 equal on CPU. The micro-batches are then grouped, in order, into one contiguous segment per live
-actor, and each segment is one call (design §5: segment-sized calls, one per actor for each
+actor, and each segment is one call (docs/design.md §8: segment-sized calls, one per actor for each
 expansion / simulation batch); the actor's LocalDenoiser cuts it back into the same micro-batches.
 Segments go least-loaded over the actors and are gathered with ``ray.wait``; a segment whose
 actor died or did not answer within ``ray.call_timeout_s`` per micro-batch it holds is re-run on

@@ -17,7 +17,7 @@
   copy of the function, so dynamo's recompile limit counts shapes, not models, and hitting it
   is an error rather than a silent fall-back to eager (which would change a plan's bits). A
   compiled denoiser runs every transition through this guided graph, guided or not (scale 0),
-  which keeps a job's bits independent of the micro-batch it lands in (design §4).
+  which keeps a job's bits independent of the micro-batch it lands in (docs/design.md §7).
 
 Within one option a plan stays a pure function of (config, checkpoint, seed); across options
 the bits differ (bf16 by ~1e-2 relative), which is why the option is part of the config hash.

@@ -2,7 +2,7 @@
 
 Every token carries its own diffusion timestep, which is what lets the pyramid schedule keep
 later tokens noisier than earlier ones (and lets MCTD cut that schedule into tree segments).
-Architecture as in the authors' release (reference.md §5): token ++ sinusoidal timestep
+Architecture as in the authors' release (docs/reference.md §5): token ++ sinusoidal timestep
 embedding -> MLP -> + sinusoidal position embedding -> post-LN transformer encoder -> x0.
 
 Two recipe levers (issue 17) change the network, never its interface ``(x_t, t) -> x0_hat``,

@@ -5,8 +5,8 @@ model call; a row of the scheduling matrix gives a per token. Tokens whose level
 change are copied through bit for bit, so a tree node's state never drifts. Initial noise is
 drawn by the tree owner; the only draws here are for rows whose levels go back up (RePaint's
 resampling, the Diffuser's ``method.resample``), each from its job's own seed and row index,
-which keeps a denoiser a pure function of its inputs (design §3-4). Guidance follows the authors' ``goal_guidance``
-(reference.md §5): the gradient of a tanh-squashed distance reward on x0_hat, taken
+which keeps a denoiser a pure function of its inputs (docs/design.md §6-7). Guidance follows the
+authors' ``goal_guidance`` (docs/reference.md §5): the gradient of a tanh-squashed distance reward on x0_hat, taken
 w.r.t. the noisy input through the network, shifts the predicted noise. With
 ``guidance_path="network"`` (diffusion.guidance_path) the gradient skips the skip path of a
 v / v_offset model (see diffusion.model), which hands the reward's per-frame gradient to each
@@ -77,7 +77,7 @@ def goal_reward(x0: torch.Tensor, start: torch.Tensor, goal: torch.Tensor,
     x0: [B, T, D] tokens (token 0 = context), start/goal: [B, d] -> R: [B]. Tokens un-stack
     into D/d frames of d numbers; context frames target ``start`` (w 20), plan frames ``goal`` (w 1).
 
-    ``mask`` [B, d] (object-wise guidance, reference §13): the plan frames' distance to the goal
+    ``mask`` [B, d] (object-wise guidance, docs/reference.md §13): the plan frames' distance to the goal
     counts only the masked dims (a cube job: its chosen cube's xyz), so the other cubes' goals
     pull nothing. The start term keeps every dim: it is reconstruction guidance on the observed
     frames, and every cube's current position is observed, so it anchors the un-guided cubes

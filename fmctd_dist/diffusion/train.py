@@ -1,4 +1,4 @@
-"""Diffusion Forcing training loop (reference.md §5), resumable and deterministic per device.
+"""Diffusion Forcing training loop (docs/reference.md §5), resumable and deterministic per device.
 
 Every token gets its own timestep, so one network learns all the partially-noised
 sequences the pyramid schedule (and hence the tree search) will show it. The loop saves
@@ -85,7 +85,7 @@ class DFLoss(torch.nn.Module):
         self.boundary_readout = readout if cfg.train.boundary_space == "position" else None
         self.position_weight = cfg.train.position_weight
         self.clean_context = cfg.train.clean_context
-        self.context_t = dc.stabilization - 1  # the sampler's level-0 timestep (reference.md §5)
+        self.context_t = dc.stabilization - 1  # the sampler's level-0 timestep (docs/reference.md §5)
 
     def forward(self, model: DFTransformer, x0: torch.Tensor, gen: torch.Generator,
                 validation: bool = False) -> torch.Tensor:

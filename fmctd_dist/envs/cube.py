@@ -14,7 +14,7 @@ random draw taken from ``seed``:
   draw them from the seed too (``_SeededCubeEnv``), so the whole episode is a function of the seed.
 Success is OGBench's: every cube within 0.04 m (0.4 obs units) of its goal, after the step.
 
-Observation (reference.md §13): 19 + 9N numbers: arm joint positions (0-5) and velocities
+Observation (docs/reference.md §13): 19 + 9N numbers: arm joint positions (0-5) and velocities
 (6-11), effector xyz (12-14), effector yaw cos/sin (15-16), gripper opening (17), gripper
 contact (18), then per cube i: xyz (19+9i..21+9i), quaternion (4), yaw cos/sin. Positions are in
 obs units, (p - [0.425, 0, 0]) x 10: a cube on the table has z = 0.2, one stack level is 0.4.

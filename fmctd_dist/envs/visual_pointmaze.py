@@ -4,7 +4,7 @@ OGBench's ``MazeEnv(ob_type='pixels')`` repaints the floor as a colour gradient 
 greys the walls, drops the goal marker and the torso light, and renders 64x64 RGB with
 ``mujoco.Renderer``. Its stock ``point.xml`` has no ``back`` camera, so without one OGBench shows
 a fixed top-down view of the whole maze. The authors add a chase camera to the point's body
-(``reference.md`` section 14): pos (0, -2.5, 5), xyaxes (1 0 0 0 2 1), mode ``trackcom``, a view
+(docs/reference.md §14): pos (0, -2.5, 5), xyaxes (1 0 0 0 2 1), mode ``trackcom``, a view
 that follows the robot, so the task is partially observable. We add the same camera through
 ``MjSpec`` to the model OGBench builds (offline; nothing is downloaded) and render from it.
 

@@ -1,4 +1,4 @@
-"""One cube episode (reference §13): plan cube paths, script the arm between segments, let the policy carry.
+"""One cube episode (docs/reference.md §13): plan cube paths, script the arm between segments, let the policy carry.
 
 Per segment:
 1. plan from the current cube xyz [3N] (obs units) to the goal;

@@ -5,7 +5,7 @@ guidance is issue 20's): start states are 100 seeded (episode, step) points of t
 play data, one plan each from the full Diffusion Forcing schedule, the same for the data's own
 windows from those starts as the reference.
 
-- **no warp**: no step moves any cube by more than the warp threshold (reference.md §13: 1.0
+- **no warp**: no step moves any cube by more than the warp threshold (docs/reference.md §13: 1.0
   obs units dense, 2.0 at H=5; 0.75 + 0.25 H in between, as the mazes).
 - **supported at the end**: every cube at the plan's last frame rests on the table (z within
   SUPPORT_TOL of 0.2) or on another cube (xy within STACK_XY, z one level, 0.4, higher): the

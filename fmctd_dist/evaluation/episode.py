@@ -2,7 +2,7 @@
 (PD on waypoints for the point, subgoals + learned policy for the ant), replan every
 ``method.replan_every`` env steps (0 = open loop), stop at success or budget.
 
-Returns a result row (design §7); the episode seed only feeds the planner's seeds (and the
+Returns a result row (docs/design.md §10); the episode seed only feeds the planner's seeds (and the
 start/goal noise under ``env.protocol=ogbench``), so an episode is a pure function of
 (config, checkpoint, task, seed).
 """

@@ -64,7 +64,7 @@ def missing(p: Prepared, store: ResultStore, log: Callable[[str], None] = print)
     """The (task, seed) keys of the grid without a row: what a (re)run still has to do.
 
     Refuses (ResultsError, before anything starts) when the run already holds rows of this
-    method and env from another config or checkpoint, listing what differs (design §7: a run
+    method and env from another config or checkpoint, listing what differs (docs/design.md §10: a run
     directory never mixes them). Unreadable row files count as missing and are reported.
     """
     cfg = p.cfg

@@ -23,7 +23,7 @@ PAPER_ANTMAZE: dict[str, dict[str, tuple[float, float, float, float]]] = {
     "s-mctd": {"medium": (94, 1, 12.5, 0.7), "large": (68, 13, 40.1, 2.6), "giant": (82, 14, 40.3, 2.9)},
     "fast-mctd": {"medium": (98, 6, 2.2, 0.1), "large": (77, 14, 2.2, 0.1), "giant": (90, 16, 2.5, 0.1)},
 }
-# Robot table (the paper's tab:robot_result, its \graypm stds; reference.md §13 lists the means only).
+# Robot table (the paper's tab:robot_result, its \graypm stds; docs/reference.md §13 lists the means only).
 PAPER_CUBE: dict[str, dict[str, tuple[float, float | None, float, float | None]]] = {
     "diffuser": {"single": (78, 23, 6.3, 0.1), "double": (12, 10, 6.4, 0.1), "triple": (8, 10, 6.5, 0.1)},
     "diffuser-replan": {"single": (92, 13, 21.4, 2.4), "double": (12, 13, 71.2, 5.1), "triple": (4, 8, 130.9, 11.6)},
@@ -33,7 +33,7 @@ PAPER_CUBE: dict[str, dict[str, tuple[float, float | None, float, float | None]]
     "s-mctd-replan": {"single": (100, 0, 8.5, 0.5), "double": (75, 3, 35.7, 18.2), "triple": (42, 11, 58.7, 33.0)},
     "fast-mctd-replan": {"single": (100, 0, 3.0, 0.2), "double": (77, 11, 5.9, 1.7), "triple": (50, 16, 9.1, 1.8)},
 }
-# Visual PointMaze table (reference.md §14): success %, planning time s; no standard deviations given.
+# Visual PointMaze table (docs/reference.md §14): success %, planning time s; no standard deviations given.
 _VISUAL = {"diffuser": (8, 0, 7.0, 6.7), "diffuser-replan": (8, 0, 26.4, 26.0),
            "diffusion-forcing": (66, 8, 14.5, 17.1),
            "mctd": (76, 2, 98.8, 320.1), "p-mctd": (86, 0, 6.8, 7.6), "s-mctd": (82, 31, 40.1, 168.7),

@@ -1,4 +1,4 @@
-"""The evaluation grid on Ray (design §5): denoiser pool, one PlannerDriver per EnvActor.
+"""The evaluation grid on Ray (docs/design.md §8): denoiser pool, one PlannerDriver per EnvActor.
 
     job process: prepare() (all checks) -> ray.init -> DenoiserPool (N DenoiserActors)
                  -> E EnvActors, each with its own PlannerDriver -> missing (task, seed) keys
@@ -10,7 +10,7 @@
 Only the job process writes files and draws progress bars; actors return rows and timings.
 Errors raised on purpose inside actors (FmctdError) reach the user as themselves.
 
-Faults (design §6; tests/test_ray_faults.py, tests/test_ray_multinode.py): a dead denoiser actor's
+Faults (docs/design.md §9; tests/test_ray_faults.py, tests/test_ray_multinode.py): a dead denoiser actor's
 micro-batches are re-routed (RayDenoiser); an episode whose EnvActor or PlannerDriver dies (killed,
 out of memory, its node gone) or is still running after ``ray.episode_timeout_s`` (alive but hung)
 left no row, so it is run again from the start on a new pair, up to ``ray.max_restarts`` times per

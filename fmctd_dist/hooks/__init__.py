@@ -1,4 +1,4 @@
-"""What a planner and an evaluation runner ask of an env family, in one place per family (design §12).
+"""What a planner and an evaluation runner ask of an env family, in one place per family (docs/design.md §13).
 
 A family differs in the tree's action set and plan value (mazes: guidance scales + the reach
 value; cubes: (unsolved cube, scale) pairs + the cube rules) and in how an episode is driven

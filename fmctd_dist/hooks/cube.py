@@ -1,4 +1,4 @@
-"""Cube hooks (reference §13): object-wise actions + the cube value; episodes driven by the cube policy.
+"""Cube hooks (docs/reference.md §13): object-wise actions + the cube value; episodes driven by the cube policy.
 
 Tree children are (unsolved cube, scale) pairs over ``env.object_scales``; the value is
 :class:`CubeValue` with the warp threshold of the model's density (``env.warp_dense`` at jump 1,

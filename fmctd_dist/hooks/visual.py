@@ -1,4 +1,4 @@
-"""Visual maze hooks (reference §14): maze guidance scales and value on estimated positions; image episodes.
+"""Visual maze hooks (docs/reference.md §14): maze guidance scales and value on estimated positions; image episodes.
 
 - Plan rules: the tree's children are the maze's guidance scales (``method.guidance_scales``), the
   guidance reads the position estimator's (x, y) of the latent plan, or with ``visual.plan_xy`` the

@@ -2,7 +2,7 @@
 
 A child slot is one action = (guidance scale, which frame-state dims the goal guidance acts
 on). Mazes guide every dim and differ only in the scale (``method.guidance_scales``: slot a
-= scale a, exactly the old hard-wired set). Cubes guide one object at a time (reference §13):
+= scale a, exactly the old hard-wired set). Cubes guide one object at a time (docs/reference.md §13):
 a child is an (unsolved cube, scale) pair, so 1 / 2 / 3 unsolved cubes x scales {1, 2, 4} give
 3 / 6 / 9 children. The search only indexes these arrays; it never asks which family built them.
 """
@@ -15,7 +15,7 @@ from typing import Sequence
 import numpy as np
 
 ALL = -1  # Actions.obj of an action that guides every state dim (no object chosen)
-CUBE_SCALES = (1.0, 2.0, 4.0)  # reference §13: scales per unsolved cube
+CUBE_SCALES = (1.0, 2.0, 4.0)  # docs/reference.md §13: scales per unsolved cube
 
 
 @dataclass(frozen=True)

@@ -1,4 +1,4 @@
-"""Cube plan value (reference §13): place cubes on their goals, physically plausibly.
+"""Cube plan value (docs/reference.md §13): place cubes on their goals, physically plausibly.
 
 A plan is N cubes' xyz per frame in obs units ([B, F, 3N]; table z = 0.2, one stack level 0.4).
 The rules, in the order they apply:

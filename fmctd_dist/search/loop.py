@@ -1,4 +1,4 @@
-"""The one search loop behind MCTD, P-MCTD, S-MCTD and Fast-MCTD (reference §3).
+"""The one search loop behind MCTD, P-MCTD, S-MCTD and Fast-MCTD (docs/reference.md §3).
 
 Sequential MCTD is K = 1; P-MCTD is K > 1 with virtual visits and redundancy-aware claims;
 the sparse variants only change the schedule/codec/checkpoint handed in, which this loop
@@ -170,7 +170,7 @@ class _Runner:
 
 class _Fallbacks:
     """What to return if no early stop: best ACHIEVED (or, for rules with partial credit, best
-    value > 0) > first NOT_REACHED > stay (reference §3.9). For the maze rule value > 0 iff ACHIEVED."""
+    value > 0) > first NOT_REACHED > stay (docs/reference.md §3.9). For the maze rule value > 0 iff ACHIEVED."""
 
     def __init__(self, goal: np.ndarray, rule: PlanValue):
         self.goal, self.rule = goal, rule

@@ -75,7 +75,7 @@ def descend(
     redundancy_aware: bool,
     leaf_parallel: bool,
 ) -> tuple[int, int] | None:
-    """One descent from the root (reference §3 step 1); returns (parent, slot) or None if wasted.
+    """One descent from the root (docs/reference.md §3 step 1); returns (parent, slot) or None if wasted.
 
     Walks down while the node has nothing claimable, is not terminal and has every slot
     filled; each chosen child gets +1 virtual visit (+A with leaf parallelisation). The slot

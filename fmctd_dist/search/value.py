@@ -1,4 +1,4 @@
-"""Maze plan value (reference §4): reach the goal early, without teleporting.
+"""Maze plan value (docs/reference.md §4): reach the goal early, without teleporting.
 
 MCTD scores a fully denoised plan by how early it comes within ``goal_radius`` of the goal,
 and gives 0 to plans that jump further than ``warp_threshold`` in one frame before getting

@@ -1,6 +1,6 @@
 """The plan value as a plug-in of the one search loop (mazes by default, cubes beside them).
 
-The loop never asks which env family it serves (design §12): it hands decoded plans and each
+The loop never asks which env family it serves (docs/design.md §13): it hands decoded plans and each
 job's action to a :class:`PlanValue` and uses what comes back for the tree's values, the
 early-stop test and the returned plan. :class:`MazeValue` wraps :func:`value.plan_values`
 unchanged, so a maze search with the default rule is the search it was before the rule was
@@ -43,7 +43,7 @@ class PlanValue(Protocol):
 
 @dataclass(frozen=True)
 class MazeValue:
-    """reference §4: reach within ``goal_radius`` early, no step over ``warp_threshold`` (world units).
+    """docs/reference.md §4: reach within ``goal_radius`` early, no step over ``warp_threshold`` (world units).
 
     ``crosses_wall`` (method.wall_test; not the paper's): [B, F + 1, 2] paths, start first ->
     [B, F] bool, step t crosses a wall; such a step counts as a warp. The env hands it in (the

@@ -1,7 +1,7 @@
 """Where the visual planner measures distances: the position estimator's (x, y) of a latent plan.
 
 The Diffusion Forcing model of a visual maze plans normalised 8-D latents, but "how far from the
-goal" is a question about positions. So guidance (reference §14: the maze guidance on the
+goal" is a question about positions. So guidance (docs/reference.md §14: the maze guidance on the
 estimator's (x, y)) and the plan value both read positions through the estimator:
 
     guidance:  z_n [..., D] -> z = z_n * std + mean -> estimator(z) = (x, y) -> (x, y) / xy scale

@@ -1,9 +1,9 @@
 """The visual planner's plan value: the maze rule on the estimator's positions of a latent plan.
 
 Plans are latents [B, F, D]; the maze value (reach the goal early within ``goal_radius``, no step
-longer than ``warp_threshold``; reference §4) is asked of their estimated (x, y), with the start
+longer than ``warp_threshold``; docs/reference.md §4) is asked of their estimated (x, y), with the start
 and goal latents read the same way. This is our reading: the paper does not give the visual value
-rule (reference §14). The plan handed to the controller stays in latents (cut at the reach, the
+rule (docs/reference.md §14). The plan handed to the controller stays in latents (cut at the reach, the
 goal latent last), so the inverse dynamics follows what the model sampled.
 """
 

@@ -28,7 +28,7 @@ from fmctd_dist.evaluation.grid import prepare
 from fmctd_dist.hooks import hooks_for
 from fmctd_dist.planners import make_planner
 
-GRIP, CONTACT = 17, 18  # the arm observation's gripper opening and contact flag (reference §13)
+GRIP, CONTACT = 17, 18  # the arm observation's gripper opening and contact flag (docs/reference.md §13)
 CUBE_XYZ = slice(19, 22)  # the policy's one-cube view: the target cube's xyz after the arm's 19 numbers
 
 

@@ -3,7 +3,7 @@
     OMP_NUM_THREADS=1 python jobs/probes/warp_sites.py checkpoints/pointmaze-large-h1 [more checkpoints]
 
 The value zeroes a plan with any step over the warp limit (0.75 + 0.25 H), and its first step is
-start -> first plan frame (reference.md §4). For each checkpoint, on the noise of the quality table
+start -> first plan frame (docs/reference.md §4). For each checkpoint, on the noise of the quality table
 (20 plans per task start, unguided and guided; fmctd_dist.evaluation.plan_quality.sample_plans):
 the share of warp-free plans, where the warps sit (first step, later token boundaries, inside
 tokens), the plans whose only warp is the first step, and per task the warp-free share. Then the

@@ -7,7 +7,7 @@ a goal-conditioned behaviour clone with hindsight relabelling.
 
 ``k`` is the sum of ``draws`` Geometric(p) draws (each >= 1; mean draws / p;
 :mod:`fmctd_dist.control.policy.hindsight`, shared with the cube). The authors'
-low-level policy used "a geometric window p=0.2 x 10 steps" (reference §7); we keep p=0.2
+low-level policy used "a geometric window p=0.2 x 10 steps" (docs/reference.md §7); we keep p=0.2
 and take two draws: mean 10 steps (~1.1 m at the data's 1.25 m/s, the controller's
 subgoal interval), mode 5-6, 90% within 2..19 steps. One draw (mean 5) puts 20% of the
 mass on k=1, a subgoal 0.13 m away whose direction is mostly noise; the controller asks for

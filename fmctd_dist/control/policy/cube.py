@@ -3,7 +3,7 @@
     action [5] = tanh(MLP(arm [19] ++ cube [9] ++ cube xyz - effector xyz [3] ++ clip_norm(subgoal - cube xyz) [3]))
 
 The planner plans cube positions; the arm needs effector moves. The policy sees one cube at a
-time (the one the planner moves, reference §13: the other cubes are held still), as a
+time (the one the planner moves, docs/reference.md §13: the other cubes are held still), as a
 28-number *view* of the observation: the arm's 19 numbers and that cube's 9 (xyz, quaternion,
 yaw cos/sin). Its subgoal is where that cube should be ~10 steps later (obs units), given
 relative to the cube, and the cube is also given relative to the effector, so what to do
