@@ -95,7 +95,8 @@ def bf16_warning(device: torch.device, field: str, cpuinfo: str | None = None) -
     if flags is None or flags & set(NATIVE_BF16_FLAGS):
         return None
     return (f"warning: {field}=bf16 on a CPU without {' or '.join(NATIVE_BF16_FLAGS)}: torch emulates bf16 here "
-            "(measured 11-12.5x slower per training step than fp32 on an AMD Zen 3 EPYC; jobs/bench/bench_train_step.py); "
+            "(measured 11-12.5x slower per training step than fp32 on an AMD Zen 3 EPYC; "
+            "jobs/bench/bench_train_step.py); "
             f"set {field}=fp32")
 
 

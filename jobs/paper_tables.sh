@@ -1,10 +1,10 @@
 #!/usr/bin/env bash
-# Every evaluation behind docs/results.md sections 9-10, then the report. Resumable: each
+# Every evaluation behind the paper's tables in docs/results.md, then the report. Resumable: each
 # eval only runs the (task, seed) keys that have no row yet, so rerun after an interruption.
 #
 #   bash jobs/paper_tables.sh                 # everything (days of CPU time at 10 seeds)
 #   SEEDS="[0,1]" bash jobs/paper_tables.sh   # fewer seeds for the slow rows
-#   ONLY=ablations bash jobs/paper_tables.sh  # main | ablations
+#   ONLY=antmaze bash jobs/paper_tables.sh    # pointmaze | antmaze | cubes | visual | ablations
 #
 # Fast-MCTD always gets all 10 seeds; SEEDS applies to the other methods and the ablations.
 # LIMIT is the per-episode planning-time limit (eval.episode_time_limit, s): a timed-out episode
@@ -19,15 +19,25 @@ ONLY="${ONLY:-all}"
 # inflate every episode's planning time (the rows' "calls" share shows such queueing).
 ev() { python jobs/eval.py ray.env_actors=1 "$@"; }
 
-if [[ "$ONLY" == all || "$ONLY" == main ]]; then
-  for env in pointmaze-medium pointmaze-large pointmaze-giant; do
-    ev method=fast-mctd env=$env eval.run=main
-    for m in s-mctd diffuser diffuser-replan diffusion-forcing mctd p-mctd; do
+# one table: Fast-MCTD(-Replan) on all 10 seeds, the other methods on SEEDS
+table() {  # table <suffix for the search methods: "" or -replan> <envs...>
+  local r=$1; shift
+  for env in "$@"; do
+    ev method=fast-mctd$r env=$env eval.run=main
+    for m in s-mctd$r diffuser diffuser-replan diffusion-forcing mctd$r p-mctd$r; do
       # rows whose checkpoint does not exist yet fail here with one 'error:' line; go on with the rest
       ev method=$m env=$env eval.run=main seeds="$SEEDS" eval.episode_time_limit="$LIMIT" || true
     done
   done
-fi
+}
+case "$ONLY" in all|main|pointmaze) table "" pointmaze-medium pointmaze-large pointmaze-giant;; esac
+case "$ONLY" in all|antmaze) table "" antmaze-medium antmaze-large antmaze-giant;; esac
+case "$ONLY" in all|cubes) table -replan cube-single cube-double cube-triple;; esac
+# the visual maze runs in process (its episodes render frames; MUJOCO_GL=egl on a headless machine)
+case "$ONLY" in all|visual) for env in visual-pointmaze-medium visual-pointmaze-large; do
+  for m in fast-mctd s-mctd diffuser diffusion-forcing mctd p-mctd mctd-replan; do
+    python jobs/eval.py runner=local method=$m env=$env eval.run=main seeds="$SEEDS" || true
+  done; done;; esac
 
 if [[ "$ONLY" == all || "$ONLY" == ablations ]]; then
   # The paper ablates on PointMaze-giant. Our giant checkpoint's plans all warp (docs/results.md

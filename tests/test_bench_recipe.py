@@ -24,7 +24,8 @@ def test_tiny_bench_trains_evaluates_and_appends_its_table(tiny_dataset, tmp_pat
                                       "method.budget=16", "method.parallel=4"]
     doc = tmp_path / "results.md"
     doc.write_text("## 4. Denoiser quality\n\nold text\n\n## 5. Next section\n")
-    cmd = [sys.executable, "jobs/bench/bench_recipe.py", "--tag", "smoke", "--budget-s", "2", "--tasks", "1", "--seeds", "0",
+    cmd = [sys.executable, "jobs/bench/bench_recipe.py", "--tag", "smoke", "--budget-s", "2", "--tasks", "1",
+           "--seeds", "0",
            "--runs-dir", str(tmp_path / "runs"), "--results-out", str(tmp_path / "results"), "--doc", str(doc),
            "--episode-limit-s", "30", "--arm", "base:", "--arm", "v:model.param=v",
            "--arm", "vnet@v:diffusion.guidance_path=network", *words]

@@ -73,6 +73,7 @@ def test_why_failed_job_reads_a_whole_cube_run(tmp_path):
 
 
 def test_why_failed_job_names_a_dir_without_rows(tmp_path):
-    out = subprocess.run([sys.executable, "jobs/probes/why_failed.py", str(tmp_path)], cwd=REPO_ROOT, capture_output=True,
+    out = subprocess.run([sys.executable, "jobs/probes/why_failed.py", str(tmp_path)], cwd=REPO_ROOT,
+                         capture_output=True,
                          text=True, timeout=120)
     assert out.returncode == 2 and "has no task=*/seed=*.parquet rows" in out.stderr and "Traceback" not in out.stderr

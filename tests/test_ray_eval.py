@@ -150,20 +150,37 @@ def free_port() -> int:
 
 
 @pytest.mark.slow
-def test_ray_job_submit(tiny_checkpoint, ray_cluster, tmp_path):
-    """`ray start --head` + `ray job submit --working-dir .` runs the eval job on that cluster.
+def readme_submit_command() -> str:
+    """The README's ``ray job submit`` command, word for word (the bash block after its test marker)."""
+    text = (REPO_ROOT / "README.md").read_text()
+    block = text.split("<!-- tested: tests/test_ray_eval.py::test_ray_job_submit -->", 1)[1]
+    block = block.split("```bash\n", 1)[1].split("```", 1)[0]
+    command = block[block.index("ray job submit"):].replace("\\\n", " ")
+    return command.splitlines()[0].strip()
 
-    Token auth is on, with the token in RAY_AUTH_TOKEN for both commands: a stale
-    ~/.ray/auth_token cannot make them disagree. The head runs with --block under this test
-    and is stopped by signalling that process (not `ray stop`, which would stop every Ray
-    cluster on the machine, the session one included).
+
+def test_ray_job_submit(ray_cluster, tmp_path):
+    """`ray start --head` + the README's `ray job submit` command, run word for word by bash, prints the table.
+
+    The command uploads only the checkpoints the job reads (jobs/runtime_env.py): under Ray's 100 MiB
+    limit whatever the repository ships. Token auth is on, with the token in RAY_AUTH_TOKEN for both
+    commands: a stale ~/.ray/auth_token cannot make them disagree. The head runs with --block under this
+    test and is stopped by signalling that process (not `ray stop`, which would stop every Ray cluster
+    on the machine, the session one included); it listens on free ports, named by RAY_ADDRESS as the
+    README's `export RAY_ADDRESS=...` line does.
     """
-    args, _ = tiny_checkpoint
+    command = readme_submit_command()
+    assert "--runtime-env-json \"$(python jobs/runtime_env.py" in command, command
     port, dash, agent, agent_grpc, metrics = (free_port() for _ in range(5))
     temp = tempfile.mkdtemp(prefix="rj", dir="/tmp")  # short: Ray's socket paths must stay < 108 chars
     token = secrets.token_hex(32)
     env = {k: v for k, v in os.environ.items() if not k.startswith("RAY_")}
-    env.update(RAY_AUTH_MODE="token", RAY_AUTH_TOKEN=token)
+    env.update(RAY_AUTH_MODE="token", RAY_AUTH_TOKEN=token, RAY_ADDRESS=f"http://127.0.0.1:{dash}")
+    env["PATH"] = f"{Path(sys.executable).parent}:{env.get('PATH', '')}"  # this venv's python and ray first
+    out = REPO_ROOT / "results" / "submitted"  # the README's eval.out and eval.run: a user's rows there are kept
+    kept = tmp_path / "kept"
+    if out.exists():
+        shutil.move(out, kept)
     head = subprocess.Popen(["ray", "start", "--head", "--block", f"--port={port}", f"--dashboard-port={dash}",
                              "--dashboard-host=127.0.0.1", "--num-cpus=2", f"--temp-dir={temp}",
                              # not the default agent ports: the session cluster of the other tests holds them
@@ -172,29 +189,27 @@ def test_ray_job_submit(tiny_checkpoint, ray_cluster, tmp_path):
                              "--disable-usage-stats"],
                             env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     try:
-        url = f"http://127.0.0.1:{dash}"
         deadline = time.monotonic() + 300  # returns at the first row; long only for a loaded machine
         while True:
             try:
-                req = urllib.request.Request(f"{url}/api/version", headers={"Authorization": f"Bearer {token}"})
+                req = urllib.request.Request(f"{env['RAY_ADDRESS']}/api/version",
+                                             headers={"Authorization": f"Bearer {token}"})
                 json.load(urllib.request.urlopen(req, timeout=5))
                 break
             except OSError:
                 assert head.poll() is None and time.monotonic() < deadline, "ray head did not come up"
                 time.sleep(1)
-        excludes = json.dumps({"excludes": ["/checkpoints/", "/data/", "/results/", "/runs/", "/.git/"]})
-        cmd = ["ray", "job", "submit", "--address", url, "--working-dir", ".", "--runtime-env-json", excludes,
-               "--", "python", "jobs/eval.py", "runner=ray", *args, *SEARCH, "tasks=[1]", "seeds=[0]",
-               f"eval.out={tmp_path}", "eval.run=submit"]
         deadline = time.monotonic() + 60
         for _ in range(30):  # the dashboard answers before the head's job agent is up
-            sub = subprocess.run(cmd, cwd=REPO_ROOT, env=env, capture_output=True, text=True, timeout=240)
+            sub = subprocess.run(["bash", "-c", command], cwd=REPO_ROOT, env=env, capture_output=True, text=True,
+                                 timeout=300)
             if "No available agent" not in sub.stderr or time.monotonic() > deadline:
                 break
             time.sleep(2)
+        log = sub.stdout + sub.stderr
         assert sub.returncode == 0, sub.stdout[-3000:] + sub.stderr[-3000:]
-        assert "succeeded" in sub.stdout + sub.stderr
-        files = list(tmp_path.glob("submit/" + ROWS))
+        assert "succeeded" in log and "| fast-mctd |" in log, log[-3000:]  # the job's table, tailed by ray
+        files = list(out.glob("fast-mctd/pointmaze-medium/task=*/seed=*.parquet"))
         assert len(files) == 1
         row = pq.read_table(files[0]).to_pylist()[0]
         assert (row["task"], row["seed"]) == (1, 0) and row["n_denoiser_actors"] >= 1
@@ -205,6 +220,30 @@ def test_ray_job_submit(tiny_checkpoint, ray_cluster, tmp_path):
         except subprocess.TimeoutExpired:
             os.killpg(head.pid, signal.SIGKILL)
         shutil.rmtree(temp, ignore_errors=True)
+        shutil.rmtree(out, ignore_errors=True)
+        if kept.exists():
+            shutil.move(kept, out)
+
+
+def test_the_job_uploads_only_the_checkpoints_it_reads():
+    """Each family's default job reads its planner and its robot's parts, and the upload stays small."""
+    from fmctd_dist.evaluation.job_upload import checkpoints_read, runtime_env, upload_bytes
+
+    assert checkpoints_read(load_config([])) == ["checkpoints/pointmaze-medium-h5"]
+    ant = load_config(["env=antmaze-large"])
+    assert checkpoints_read(ant) == ["checkpoints/antmaze-large-h5", "checkpoints/antmaze-large-policy"]
+    cube = load_config(["env=cube-double", "method=fast-mctd-replan"])
+    assert checkpoints_read(cube) == ["checkpoints/cube-double-h5", "checkpoints/cube-single-policy"]
+    env = runtime_env(load_config([]))
+    assert "/checkpoints/*" in env["excludes"] and env["excludes"][-1] == "!/checkpoints/pointmaze-medium-h5"
+    assert upload_bytes(REPO_ROOT, env) < 50 * 2**20  # Ray refuses over 100 MiB
+
+
+def test_a_broken_job_fails_before_anything_is_uploaded(tmp_path):
+    with pytest.raises(CheckpointError):
+        from fmctd_dist.evaluation.job_upload import runtime_env
+
+        runtime_env(load_config([f"checkpoint={tmp_path / 'nothing'}"]))
 
 
 def test_address_local_starts_a_private_cluster_at_nice_0(monkeypatch):

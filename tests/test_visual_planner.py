@@ -320,7 +320,8 @@ def test_ideal_latent_plans_solve_task3_through_the_visual_episode():
     import subprocess
     import sys
 
-    out = subprocess.run([sys.executable, "jobs/probes/visual_ideal_plans.py", f"env={MEDIUM}", "tasks=[3]"], cwd=REPO_ROOT,
+    out = subprocess.run([sys.executable, "jobs/probes/visual_ideal_plans.py", f"env={MEDIUM}", "tasks=[3]"],
+                         cwd=REPO_ROOT,
                          capture_output=True, text=True, timeout=600, env={**os.environ, "OMP_NUM_THREADS": "1"})
     assert out.returncode == 0, out.stderr[-2000:]
     assert "task 3 seed 0: success" in out.stdout and "jump=5: 1/1 solved" in out.stdout

@@ -1,8 +1,9 @@
 """Probe: does the visual planner hold its plan to its context, given a start like its training data's?
 
     python jobs/probes/visual_context_probe.py                                   # the shipped medium H=5 model
-    python jobs/probes/visual_context_probe.py visual.episodes=100 checkpoint=runs/visual/visual-pointmaze-medium-h5-e100
-    python jobs/probes/visual_context_probe.py env=visual-pointmaze-large visual.episodes=100   # the shipped large model
+    python jobs/probes/visual_context_probe.py visual.episodes=100 \
+        checkpoint=runs/visual/visual-pointmaze-medium-h5-e100
+    python jobs/probes/visual_context_probe.py env=visual-pointmaze-large visual.episodes=100  # shipped large
     python jobs/probes/visual_context_probe.py visual.episodes=100 jump=1 checkpoint=<a dense (H=1) latent model>
 
 Every searched plan of docs/results.md 13.4 starts 3-8 estimated units from its start frame, where

@@ -1,6 +1,6 @@
 """Probe: does the VAE's latent space keep distant places apart, at the scale of one frame's step?
 
-    python jobs/probes/visual_latent_aliasing.py visual.episodes=100                       # medium, the shipped H=5 model
+    python jobs/probes/visual_latent_aliasing.py visual.episodes=100             # medium, the shipped H=5 model
     python jobs/probes/visual_latent_aliasing.py env=visual-pointmaze-large visual.episodes=100
     python jobs/probes/visual_latent_aliasing.py visual.episodes=100 jump=1 checkpoint=runs/visual/s29-h1-e100-bw3-cos
 

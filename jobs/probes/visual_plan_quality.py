@@ -1,7 +1,8 @@
 """Latent plan quality of a visual planner: warps on estimated positions and distance to the latent manifold.
 
     python jobs/probes/visual_plan_quality.py env=visual-pointmaze-medium                 # Fast-MCTD, tasks 1-5, seed 0
-    python jobs/probes/visual_plan_quality.py env=visual-pointmaze-medium checkpoint=runs/visual/visual-pointmaze-medium-h5
+    python jobs/probes/visual_plan_quality.py env=visual-pointmaze-medium \
+        checkpoint=runs/visual/visual-pointmaze-medium-h5
 
 One search per task from the start frame to the goal frame (no control); per task the share of
 plans that warp, the median largest and first step, the closest approach to the goal, and the
