@@ -18,7 +18,7 @@ precision (fmctd_dist.evaluation.plan_quality, as jobs/bench_denoiser.py) and Fa
 small fixed grid (``jobs/eval.py runner=local eval.threads=1`` into results/recipe-<tag>-<NAME>).
 Its numbers go to <arm dir>/bench.json, so a rerun resumes: finished training returns at once
 and evaluated arms are read back. The table is printed and appended, with the command, to the
-"Recipe bench" subsection of section 4 of docs/results.md (``--doc ''``: not at all).
+"Recipe bench" record of docs/notebook/training-campaign.md (the end of the file) (``--doc ''``: not at all).
 """
 
 from __future__ import annotations
@@ -242,7 +242,8 @@ def parse(argv: list[str]) -> argparse.Namespace:
     ap.add_argument("--episode-limit-s", type=float, default=120.0, help="eval.episode_time_limit of the grid")
     ap.add_argument("--runs-dir", default="runs/recipe")
     ap.add_argument("--results-out", default="results", help="eval.out of the Fast-MCTD grid")
-    ap.add_argument("--doc", default="docs/results.md", help="file the table is appended to; '' = none")
+    ap.add_argument("--doc", default="docs/notebook/training-campaign.md",
+                    help="file the table is appended to; '' = none")
     ap.add_argument("--evaluate", help=argparse.SUPPRESS)  # internal: evaluate one arm dir
     ap.add_argument("--checkpoint", help=argparse.SUPPRESS)
     ap.add_argument("--name", help=argparse.SUPPRESS)
