@@ -22,8 +22,8 @@ from omegaconf import MISSING, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
 from fmctd_dist.errors import ConfigError, did_you_mean, unknown_name
-from fmctd_dist.families import ANT_ENVS, CUBE_ENVS, ENV_NAMES, MAZES, POINT_ENVS  # noqa: F401 - re-exported
-from fmctd_dist.families import ENV_FIELD_READERS, MAZE_FAMILIES, PENDING_FAMILIES, family, require_family, state_dim
+from fmctd_dist.registry import ANT_ENVS, CUBE_ENVS, ENV_NAMES, MAZES, POINT_ENVS  # noqa: F401 - re-exported
+from fmctd_dist.registry import ENV_FIELD_READERS, MAZE_FAMILIES, PENDING_FAMILIES, family, require_family, state_dim
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 CONFIG_DIR = REPO_ROOT / "configs"
@@ -376,7 +376,7 @@ class VisualConfig:
     # Train episodes whose every frame is rendered and encoded for the planner's latent data, a
     # seeded subset (recorded in the latent manifest); 0 = all of data.episodes
     episodes: int = spec(100, ge=0, why="seeded subset of train episodes for the latent data; 0 = all")
-    # Plan [z, x, y] frames: each latent with the position estimator's reading of it (data/visual_dataset.py),
+    # Plan [z, x, y] frames: each latent with the position estimator's reading of it (families/visual/dataset.py),
     # so the diffusion loss sees positions and guidance / value read the plan's own (x, y) (our variant:
     # the paper plans latents only). A planner checkpoint is trained for one choice.
     plan_xy: bool = False

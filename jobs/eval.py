@@ -17,7 +17,7 @@ from fmctd_dist.config import load_config
 from fmctd_dist.evaluation.grid import prepare, run_local
 from fmctd_dist.evaluation.plots import plot_success_vs_time
 from fmctd_dist.evaluation.results import ResultStore, markdown_table, summarise
-from fmctd_dist.hooks import hooks_for
+from fmctd_dist.family import hooks_for
 
 
 def main(argv: list[str]) -> int:

@@ -6,10 +6,10 @@
     python jobs/eval_policy.py env=cube-single policy.out=checkpoints/cube-single-policy reach.rows=100
     python jobs/eval_policy.py env=cube-double policy.out=checkpoints/cube-single-policy   # the single-cube policy
 
-Ant (fmctd_dist/control/policy/ant_reach.py): for reach.rows val rows (seeded), restore the
+Ant (fmctd_dist/families/maze/ant_reach.py): for reach.rows val rows (seeded), restore the
 ant's MuJoCo state, subgoal = the episode's x, y reach.offset steps later, reach.max_steps env
 steps; reached = within reach.radius after a step; reference: the ant expert. Cube
-(fmctd_dist/control/policy/cube_reach.py): restore a val row inside a pick-and-place, the
+(fmctd_dist/families/cube/reach.py): restore a val row inside a pick-and-place, the
 plan is the data's cube path to its end (subgoal reach.offset steps ahead, moved on within
 reach.advance), reached = the cube within reach.radius (0.4 obs units = 0.04 m) of the end;
 reference: OGBench's CubePlanOracle. reach.expert=false skips the reference, reach.zero=false

@@ -16,8 +16,8 @@ import time
 
 from fmctd_dist.cli import run
 from fmctd_dist.config import load_config
-from fmctd_dist.data.dataset import make_dataset
-from fmctd_dist.families import family
+from fmctd_dist.families.maze.data import make_dataset
+from fmctd_dist.registry import family
 
 
 def main(argv: list[str]) -> int:
@@ -44,8 +44,8 @@ def main(argv: list[str]) -> int:
 
 
 def cube_main(cfg, t0: float) -> int:
-    """Cube play data (fmctd_dist/data/cube_dataset.py): OGBench's CubePlanOracle + set_new_target loop."""
-    from fmctd_dist.data.cube_dataset import make_cube_dataset
+    """Cube play data (fmctd_dist/families/cube/data.py): OGBench's CubePlanOracle + set_new_target loop."""
+    from fmctd_dist.families.cube.data import make_cube_dataset
 
     path, manifest = make_cube_dataset(cfg)
     action = "generated" if "_generation_s" in manifest else "verified existing"

@@ -16,7 +16,7 @@ import time
 
 from fmctd_dist.cli import run
 from fmctd_dist.config import load_config
-from fmctd_dist.data.visual_frames import episode_subset, make_frames
+from fmctd_dist.families.visual.frame_sets import episode_subset, make_frames
 
 
 def main(argv: list[str]) -> int:

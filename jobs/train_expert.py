@@ -3,11 +3,11 @@
     python jobs/train_expert.py expert.max_steps=2000 expert.start_steps=500 eval.every=1000   # smoke -> runs/
     python jobs/train_expert.py expert.out=checkpoints/ant-expert expert.max_steps=1000000
 
-The task (fmctd_dist/ant/direction_env.py): OGBench's open-arena ant, a random unit
+The task (fmctd_dist/families/maze/expert/direction_env.py): OGBench's open-arena ant, a random unit
 direction per episode, resampled every env.resample_every steps; reward = torso velocity
 along it + healthy reward - control cost; the episode ends when the ant falls. The
 progress bar shows the mean return, mean speed along the commanded direction (m/s) of the
-last episodes, the last evaluation's success rate (fmctd_dist/ant/evaluate.py: every
+last episodes, the last evaluation's success rate (fmctd_dist/families/maze/expert/evaluate.py: every
 segment >= eval.min_speed m/s along its direction without falling), alpha and steps/s.
 
 A killed run continues from its last checkpoint (expert.ckpt_every) when rerun with the
@@ -17,8 +17,8 @@ default: SAC's small matrices gain little from more threads and the machine is s
 
 import time
 
-from fmctd_dist.ant.config import load_expert_config
-from fmctd_dist.ant.train import train_expert
+from fmctd_dist.families.maze.expert.config import load_expert_config
+from fmctd_dist.families.maze.expert.train import train_expert
 from fmctd_dist.cli import run
 
 

@@ -6,9 +6,9 @@
 
 The dataset is the one `jobs/make_dataset.py` writes for the same env= / data.* words
 (manifest and sha256 verified; the ant's expert too). Ant: the ant state without x, y + the
-subgoal relative to the ant -> 8 torques (fmctd_dist/control/policy/ant.py). Cube: the arm +
+subgoal relative to the ant -> 8 torques (fmctd_dist/families/maze/ant_policy.py). Cube: the arm +
 the target cube + its subgoal relative to the cube -> the 5-D action
-(fmctd_dist/control/policy/cube.py). MSE onto the data's actions, subgoals relabelled in
+(fmctd_dist/families/cube/policy.py). MSE onto the data's actions, subgoals relabelled in
 hindsight (fmctd_dist/control/policy/hindsight.py). The progress bar shows the train loss,
 the last val loss and steps/s; the end prints the val loss (beside the ant expert's, the
 noise floor) and the reach rates of the policy and the family's references.

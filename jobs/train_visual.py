@@ -10,41 +10,41 @@
 
 Each part is resumable (rerun the same command) and bounded by ``<part>.time_budget_s`` of
 training wall time; ``vae.*``, ``latents.*``, ``estimator.*``, ``invdyn.*`` and ``reach.*`` are this job's own
-config (fmctd_dist/visual/config.py), everything else the planner's.
+config (fmctd_dist/families/visual/config.py), everything else the planner's.
 """
 
 import json
 import time
 
 from fmctd_dist.cli import run
-from fmctd_dist.visual.config import load_parts_args
+from fmctd_dist.families.visual.config import load_parts_args
 
 
 def main(argv: list[str]) -> int:
     t0 = time.time()
     cfg, pcfg, part = load_parts_args(argv)
     if part == "vae":
-        from fmctd_dist.visual.train_vae import train_vae
+        from fmctd_dist.families.visual.train_vae import train_vae
 
         summary = train_vae(cfg, pcfg)
     elif part == "episodes":
-        from fmctd_dist.visual.episodes import make_episodes
+        from fmctd_dist.families.visual.episodes import make_episodes
 
         path, m = make_episodes(cfg, pcfg)
         summary = {"out_dir": str(path), "episodes": len(m["episodes"]), "val_episodes": len(m["val_episodes"]),
                    "frames_digest": m["frames_digest"], "generation": m["generation"]}
     elif part == "latents":
-        from fmctd_dist.visual.latents import make_latents
+        from fmctd_dist.families.visual.latents import make_latents
 
         path, m = make_latents(cfg, pcfg)
         summary = {"out_dir": str(path), "episodes": len(m["episodes"]), "val_episodes": len(m["val_episodes"]),
                    "frames": m["frames"], "sha256": m["sha256"], "generation": m["generation"]}
     elif part == "reach":
-        from fmctd_dist.visual.reach import run_reach
+        from fmctd_dist.families.visual.reach import run_reach
 
         summary = run_reach(cfg, pcfg)
     else:
-        from fmctd_dist.visual.train_head import train_head
+        from fmctd_dist.families.visual.train_head import train_head
 
         summary = train_head(cfg, pcfg, part)
     print(json.dumps(summary, indent=1, default=str))

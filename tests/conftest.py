@@ -16,8 +16,8 @@ from fmctd_dist.device import torch_threads  # noqa: F401 - re-exported: tests d
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 # before any test opens a GL context (ours or OGBench's own pixel env): Mesa's LLVM, loaded first, makes
-# triton's import segfault later in the same worker (fmctd_dist/envs/visual_pointmaze.py says more)
-from fmctd_dist.envs.visual_pointmaze import load_llvm_users_first  # noqa: E402
+# triton's import segfault later in the same worker (fmctd_dist/families/visual/env.py says more)
+from fmctd_dist.families.visual.env import load_llvm_users_first  # noqa: E402
 
 load_llvm_users_first()
 
@@ -134,7 +134,7 @@ def load_job(name: str) -> ModuleType:
 def tiny_dataset(tmp_path_factory):
     """A small medium-maze dataset (8 train + 1 val episodes of 301 steps), generated once."""
     from fmctd_dist.config import load_config
-    from fmctd_dist.data.dataset import make_dataset
+    from fmctd_dist.families.maze.data import make_dataset
 
     root = tmp_path_factory.mktemp("data")
     cfg = load_config(TINY_DATA + [f"data.root={root}"], method="mctd")
@@ -161,7 +161,7 @@ def tiny_checkpoint(tiny_dataset, tmp_path_factory):
     import torch
 
     from fmctd_dist.config import load_config
-    from fmctd_dist.data.dataset import load_dataset
+    from fmctd_dist.families.maze.data import load_dataset
     from fmctd_dist.data.windows import train_data
     from fmctd_dist.diffusion.train import train
 

@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 import torch
 
-from fmctd_dist.ant.config import load_expert_config
-from fmctd_dist.ant.direction_env import ACT_DIM, ANT_OBS_DIM, OBS_DIM, AntDirectionEnv, expert_input
-from fmctd_dist.ant.expert import MODEL_FILE, load_expert
-from fmctd_dist.ant.sac import SAC, ReplayBuffer
-from fmctd_dist.ant.train import train_expert
+from fmctd_dist.families.maze.expert.config import load_expert_config
+from fmctd_dist.families.maze.expert.direction_env import ACT_DIM, ANT_OBS_DIM, OBS_DIM, AntDirectionEnv, expert_input
+from fmctd_dist.families.maze.expert.expert import MODEL_FILE, load_expert
+from fmctd_dist.families.maze.expert.sac import SAC, ReplayBuffer
+from fmctd_dist.families.maze.expert.train import train_expert
 from fmctd_dist.config import REPO_ROOT
 from fmctd_dist.diffusion.checkpoint import load_train_state
 from fmctd_dist.errors import CheckpointError, ConfigError

@@ -13,14 +13,14 @@ import numpy as np
 import pytest
 import torch
 
-from fmctd_dist.control.policy.ant import NAME, policy_input
-from fmctd_dist.control.policy.ant_data import make_rows, run_ends
+from fmctd_dist.families.maze.ant_policy import NAME, policy_input
+from fmctd_dist.families.maze.ant_policy_rows import make_rows, run_ends
 from fmctd_dist.control.policy.checkpoint import MODEL_FILE, load_policy
 from fmctd_dist.control.policy.config import load_policy_args
 from fmctd_dist.control.policy.hindsight import sample_offsets, sample_pairs
 from fmctd_dist.control.policy.train import train_policy
 from fmctd_dist.config import REPO_ROOT
-from fmctd_dist.control.ant_controller import AntPlanController, run_plan
+from fmctd_dist.families.maze.ant_controller import AntPlanController, run_plan
 from fmctd_dist.diffusion.checkpoint import load_train_state
 from fmctd_dist.errors import CheckpointError, ConfigError
 from conftest import torch_threads
@@ -41,7 +41,7 @@ def tiny(root, max_steps: int, *extra: str):
 @pytest.fixture(scope="module")
 def data_root(tmp_path_factory):
     """2 train + 1 val antmaze-medium episodes of 60 steps, made by the shipped expert."""
-    from fmctd_dist.data.dataset import make_dataset
+    from fmctd_dist.families.maze.data import make_dataset
 
     root = tmp_path_factory.mktemp("antdata")
     cfg, _ = tiny(root, 1)
@@ -211,8 +211,8 @@ def test_clear_errors_for_missing_wrong_or_mismatched_policies(data_root, traine
 
 def test_restored_rows_replay_the_dataset(data_root):
     """Reach tries restore a row's MuJoCo state from its 29-D obs: replaying its torques reproduces the data."""
-    from fmctd_dist.data.dataset import dataset_dir
-    from fmctd_dist.envs.antmaze import AntMaze
+    from fmctd_dist.families.maze.data import dataset_dir
+    from fmctd_dist.families.maze.antmaze import AntMaze
 
     cfg, _ = tiny(data_root, 1)
     with np.load(dataset_dir(cfg) / "val.npz") as z:
@@ -230,9 +230,9 @@ def test_restored_rows_replay_the_dataset(data_root):
 
 
 def test_reach_is_deterministic_and_the_expert_beats_zero_torques(data_root):
-    from fmctd_dist.ant.expert import load_expert
-    from fmctd_dist.control.policy.ant_data import load_policy_data
-    from fmctd_dist.control.policy.ant_reach import evaluate_reach, expert_controller, zero_controller
+    from fmctd_dist.families.maze.expert.expert import load_expert
+    from fmctd_dist.families.maze.ant_policy_rows import load_policy_data
+    from fmctd_dist.families.maze.ant_reach import evaluate_reach, expert_controller, zero_controller
 
     cfg, _ = tiny(data_root, 1)
     _, val, _ = load_policy_data(cfg, drop_fallen=True)
@@ -297,7 +297,7 @@ def test_controller_holds_the_last_point_and_never_skips_an_interval():
 
 
 def test_controller_drives_the_real_ant_with_the_trained_policy(trained):
-    from fmctd_dist.envs.antmaze import AntMaze
+    from fmctd_dist.families.maze.antmaze import AntMaze
 
     out, _ = trained
     env = AntMaze("antmaze-medium")

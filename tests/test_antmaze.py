@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from fmctd_dist.config import REPO_ROOT, load_config
-from fmctd_dist.data.dataset import dataset_dir, load_dataset, make_dataset
+from fmctd_dist.families.maze.data import dataset_dir, load_dataset, make_dataset
 from fmctd_dist.errors import CheckpointError, ConfigError, DatasetError
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
@@ -37,8 +37,8 @@ def ant_dataset(tmp_path_factory):
 # ---- env ----
 
 def test_make_env_gives_an_ant_with_29d_obs_and_8d_actions():
-    from fmctd_dist.envs import make_env
-    from fmctd_dist.envs.antmaze import AntMaze
+    from fmctd_dist.families.maze import make_env
+    from fmctd_dist.families.maze.antmaze import AntMaze
 
     env = make_env("antmaze-medium")
     assert isinstance(env, AntMaze) and env.geometry.name == "antmaze-medium"
@@ -57,7 +57,7 @@ def test_make_env_gives_an_ant_with_29d_obs_and_8d_actions():
 
 
 def test_success_is_within_half_a_metre_after_the_step():
-    from fmctd_dist.envs import make_env
+    from fmctd_dist.families.maze import make_env
 
     env = make_env("antmaze-medium")
     env.reset(2, seed=0)
@@ -70,7 +70,7 @@ def test_success_is_within_half_a_metre_after_the_step():
 
 
 def test_fall_detectors_on_hand_made_states():
-    from fmctd_dist.envs.antmaze import healthy, upright
+    from fmctd_dist.families.maze.antmaze import healthy, upright
 
     obs = np.zeros((3, 29))
     obs[:, 2] = [0.55, 0.1, 0.3]  # torso height
@@ -150,8 +150,8 @@ def test_missing_expert_dir_is_one_clear_error(tmp_path):
 
 
 def test_wrong_observation_size_to_the_expert():
-    from fmctd_dist.ant.direction_env import expert_input
-    from fmctd_dist.ant.expert import load_expert
+    from fmctd_dist.families.maze.expert.direction_env import expert_input
+    from fmctd_dist.families.maze.expert.expert import load_expert
 
     expert = load_expert(EXPERT)
     ob = np.zeros(29)
@@ -163,7 +163,7 @@ def test_wrong_observation_size_to_the_expert():
 
 
 def test_unknown_env_names_suggest_the_closest():
-    from fmctd_dist.envs import make_env
+    from fmctd_dist.families.maze import make_env
 
     with pytest.raises(ConfigError, match="did you mean 'antmaze-medium'"):
         load_config(["env=antmaze-medim"])

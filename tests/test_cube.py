@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from fmctd_dist.config import load_config
-from fmctd_dist.data.cube_dataset import (generate_episode, global_numpy_seed, load_cube_dataset,
+from fmctd_dist.families.cube.data import (generate_episode, global_numpy_seed, load_cube_dataset,
                                           make_cube_dataset)
-from fmctd_dist.envs.cube import (SUCCESS_RADIUS, CubeEpisodes, cube_columns, cube_xyz, cubes_at_goal,
+from fmctd_dist.families.cube.env import (SUCCESS_RADIUS, CubeEpisodes, cube_columns, cube_xyz, cubes_at_goal,
                                   make_cube_env, to_obs_units)
 from fmctd_dist.errors import ConfigError, DatasetError
 
@@ -150,7 +150,7 @@ def test_dataset_layout_and_manifest(tiny_cube):
 
 def test_dataset_determinism_and_resume(tiny_cube, tmp_path, monkeypatch):
     """Same seed -> same sha256; a run interrupted after one episode resumes to the same bytes."""
-    import fmctd_dist.data.cube_dataset as cd
+    import fmctd_dist.families.cube.data as cd
 
     _, _, m = tiny_cube
     cfg = tiny_cfg(tmp_path)
@@ -205,7 +205,7 @@ def test_windows_over_cube_xyz(tiny_cube, jump, tokens):
 def test_unknown_cube_env_suggests():
     with pytest.raises(ConfigError, match="did you mean 'cube-single'"):
         load_config(["env=cube-singel"], method="mctd", serves=("cube",))
-    from fmctd_dist.families import env_spec
+    from fmctd_dist.registry import env_spec
 
     with pytest.raises(ConfigError, match="did you mean 'cube-triple'"):
         env_spec("cube-tripel")
@@ -221,8 +221,8 @@ def test_cube_data_for_a_maze_model(tiny_cube, tmp_path):
     """A cube dataset given to a maze config, and a maze dataset given to a cube config: one DatasetError each."""
     import json
 
-    from fmctd_dist.data.cube_dataset import load_cube_manifest
-    from fmctd_dist.data.dataset import load_dataset
+    from fmctd_dist.families.cube.data import load_cube_manifest
+    from fmctd_dist.families.maze.data import load_dataset
 
     cfg, path, m = tiny_cube
     with pytest.raises(DatasetError, match="env='cube-single'.*env.name=pointmaze-medium"):
@@ -234,8 +234,8 @@ def test_cube_data_for_a_maze_model(tiny_cube, tmp_path):
 
 def test_maze_code_refuses_cube_envs(tiny_cube):
     """The maze code guards its own entries: a cube env name stops there with one error naming the cube jobs."""
-    from fmctd_dist.data.dataset import load_dataset, make_dataset
-    from fmctd_dist.envs import make_env, maze_geometry
+    from fmctd_dist.families.maze.data import load_dataset, make_dataset
+    from fmctd_dist.families.maze import make_env, maze_geometry
 
     cfg, _, _ = tiny_cube
     for call in (lambda: make_env("cube-single"), lambda: maze_geometry("cube-double"),
@@ -288,7 +288,7 @@ def test_train_and_load_a_cube_model(tiny_cube, tmp_path, param):
     assert manifest["token_dim"] == 30 and model.frame_dim == 3
     x = torch.randn(2, 3, 30)
     assert model(x, torch.zeros(2, 3, dtype=torch.long)).shape == (2, 3, 30)
-    from fmctd_dist.evaluation.cube_quality import cube_plan_quality
+    from fmctd_dist.families.cube.quality import cube_plan_quality
 
     row = cube_plan_quality(tmp_path / "ckpt", cfg, n=4)  # the quality-table row runs end to end on a cube model
     assert row["warp"] == 2.0 and row["data"]["no_warp"] == 1.0 and 0.0 <= row["model"]["no_warp"] <= 1.0
@@ -310,7 +310,7 @@ def test_v_offset_keeps_each_cube_coordinate_apart():
 
 def test_cube_plan_rules_on_hand_made_plans():
     """The quality table's rules: a warp, a cube left mid-air, a clean stack, two cubes moved at once."""
-    from fmctd_dist.evaluation.cube_quality import plan_row, supported
+    from fmctd_dist.families.cube.quality import plan_row, supported
 
     start = np.array([[0.0, 0.0, 0.2, 2.0, 0.0, 0.2]])  # two cubes on the table
     lift = np.linspace(start[0], [0.0, 0.0, 1.5, 2.0, 0.0, 0.2], 9)[1:][None]  # cube 0 lifted, left mid-air

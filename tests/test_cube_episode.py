@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 
 from fmctd_dist.config import load_config
-from fmctd_dist.control.cube_scripts import ABOVE, EFFECTOR, PrePosition, Release, yaw_offset
-from fmctd_dist.envs.cube import CubeEpisodes
+from fmctd_dist.families.cube.scripts import ABOVE, EFFECTOR, PrePosition, Release, yaw_offset
+from fmctd_dist.families.cube.env import CubeEpisodes
 from fmctd_dist.errors import CheckpointError, ConfigError
-from fmctd_dist.evaluation.cube_failures import DROPPED, KNOCKED, PLANNING_TIME_OUT, TIME_OUT, WRONG_CUBE, why_failed
-from fmctd_dist.hooks import hooks_for
+from fmctd_dist.families.cube.failures import DROPPED, KNOCKED, PLANNING_TIME_OUT, TIME_OUT, WRONG_CUBE, why_failed
+from fmctd_dist.family import hooks_for
 from fmctd_dist.search.actions import scale_actions
 from fmctd_dist.search.loop import SearchParams, search
 from fmctd_dist.search.value_rule import MazeValue
@@ -138,8 +138,8 @@ def test_pre_position_turns_to_the_cube_only_when_asked(single):
 # ---- target choice ----
 
 def test_target_is_the_unsolved_cube_whose_plan_moves_most():
-    from fmctd_dist.evaluation.cube_episode import choose_target, targets_left
-    from fmctd_dist.search.cube_value import CubeValue
+    from fmctd_dist.families.cube.episode import choose_target, targets_left
+    from fmctd_dist.families.cube.value import CubeValue
 
     state = np.array([[0.0, 0.0, 0.2], [1.0, 1.0, 0.2], [2.0, 2.0, 0.2]])
     plan = np.repeat(state[None], 10, 0)
@@ -182,7 +182,7 @@ def tiny_double(tmp_path_factory):
 
     from fmctd_dist.control.policy.config import PolicyConfig
     from fmctd_dist.control.policy.checkpoint import save_policy
-    from fmctd_dist.control.policy.cube import CUBE_SPEC
+    from fmctd_dist.families.cube.policy import CUBE_SPEC
     from fmctd_dist.control.policy.network import GoalPolicyNet
     from fmctd_dist.data.registry import load_family_dataset, make_family_dataset
     from fmctd_dist.data.windows import train_data

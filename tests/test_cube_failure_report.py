@@ -9,7 +9,7 @@ import sys
 import numpy as np
 
 from fmctd_dist.config import REPO_ROOT
-from fmctd_dist.evaluation.cube_failure_report import failure_facts, has_reasons, reason_table
+from fmctd_dist.families.cube.failure_report import failure_facts, has_reasons, reason_table
 from fmctd_dist.evaluation.results import ResultStore
 
 GOAL = [3.0, 0.0, 0.2]

@@ -14,11 +14,11 @@ import pytest
 from fmctd_dist.config import REPO_ROOT
 from fmctd_dist.control.policy.checkpoint import load_policy, read_policy_manifest
 from fmctd_dist.control.policy.config import load_policy_args
-from fmctd_dist.control.policy.cube import IN_DIM, VIEW_DIM, cube_view, policy_input
-from fmctd_dist.control.policy.cube_data import load_cube_policy_data, make_rows
+from fmctd_dist.families.cube.policy import IN_DIM, VIEW_DIM, cube_view, policy_input
+from fmctd_dist.families.cube.policy_rows import load_cube_policy_data, make_rows
 from fmctd_dist.control.policy.hindsight import label_run_ends, sample_pairs
 from fmctd_dist.control.policy.train import train_policy
-from fmctd_dist.control.subgoal import SubgoalTracker
+from fmctd_dist.families.maze.subgoal import SubgoalTracker
 from fmctd_dist.diffusion.checkpoint import load_train_state
 from fmctd_dist.errors import CheckpointError, ConfigError
 from conftest import torch_threads
@@ -40,7 +40,7 @@ def tiny(root, max_steps: int, *extra: str):
 @pytest.fixture(scope="module")
 def data_root(tmp_path_factory):
     """2 train + 1 val cube-single play episodes of 201 steps (each holds a completed pick-and-place)."""
-    from fmctd_dist.data.cube_dataset import make_cube_dataset
+    from fmctd_dist.families.cube.data import make_cube_dataset
 
     root = tmp_path_factory.mktemp("cubedata")
     make_cube_dataset(tiny(root, 1)[0], progress=False)
@@ -157,7 +157,7 @@ def test_a_missing_dataset_is_one_dataset_error(tmp_path):
 # ---- reach and jobs ----
 
 def test_reach_restores_val_states_and_is_deterministic(data_root):
-    from fmctd_dist.control.policy.cube_reach import evaluate_reach, zero_controller
+    from fmctd_dist.families.cube.reach import evaluate_reach, zero_controller
 
     cfg, _ = tiny(data_root, 1)
     _, val, _ = load_cube_policy_data(cfg)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from fmctd_dist.search.actions import ALL, object_actions, scale_actions
-from fmctd_dist.search.cube_value import PARTIAL, CubeValue
+from fmctd_dist.families.cube.value import PARTIAL, CubeValue
 from fmctd_dist.search.value import ACHIEVED, NOT_REACHED, WARP
 
 Z = 0.2  # on the table

@@ -8,7 +8,7 @@ import pytest
 
 from conftest import TINY_DATA
 from fmctd_dist.config import load_config
-from fmctd_dist.data.dataset import dataset_dir, load_dataset, make_dataset
+from fmctd_dist.families.maze.data import dataset_dir, load_dataset, make_dataset
 from fmctd_dist.data.tokens import Normaliser, PlanCodec, frames_to_tokens, tokens_to_frames
 from fmctd_dist.data.windows import WindowSampler, start_balance_cdf, train_data
 from fmctd_dist.errors import ConfigError, DatasetError
@@ -34,7 +34,7 @@ def test_dataset_contents(tiny_dataset):
     steps = np.linalg.norm(np.diff(ds.train, axis=1), axis=-1)
     assert steps.max() <= 0.2 * np.sqrt(2) + 1e-5  # point dynamics: |dxy| <= 0.2 per axis
     assert ds.normaliser.std.min() > 1.0
-    from fmctd_dist.envs import maze_geometry
+    from fmctd_dist.families.maze import maze_geometry
 
     assert maze_geometry("pointmaze-medium").in_free_cell(ds.train).all()
 

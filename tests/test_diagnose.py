@@ -2,9 +2,9 @@
 
 import numpy as np
 
-from fmctd_dist.envs import maze_geometry
-from fmctd_dist.envs.maze import densify
-from fmctd_dist.evaluation.diagnose import failures
+from fmctd_dist.families.maze import maze_geometry
+from fmctd_dist.families.maze.geometry import densify
+from fmctd_dist.families.maze.diagnose import failures
 
 
 def row(plan, traj, success=False, status="early_stop"):

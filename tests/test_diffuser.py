@@ -13,7 +13,7 @@ import torch
 
 from conftest import TINY_DATA
 from fmctd_dist.config import REPO_ROOT, ModelConfig, load_config
-from fmctd_dist.data.dataset import load_dataset
+from fmctd_dist.families.maze.data import load_dataset
 from fmctd_dist.data.windows import train_data
 from fmctd_dist.denoiser.local import LocalDenoiser
 from fmctd_dist.denoiser.protocol import DenoiseBatch

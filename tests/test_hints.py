@@ -119,7 +119,7 @@ def test_p_mctd_with_shipped_jump5_checkpoint_points_at_the_jump1_one():
 
 
 def test_missing_dataset_hint_makes_that_dataset(tmp_path):
-    from fmctd_dist.data.dataset import load_dataset
+    from fmctd_dist.families.maze.data import load_dataset
 
     cfg = load_config(["env.horizon=100", "data.train_window=100", "data.episodes=2", "data.episode_steps=120",
                        f"data.root={tmp_path}", "data.seed=3"])
@@ -131,7 +131,7 @@ def test_missing_dataset_hint_makes_that_dataset(tmp_path):
 
 
 def test_corrupt_dataset_hint_regenerates_it(tiny_dataset, tmp_path):
-    from fmctd_dist.data.dataset import load_dataset
+    from fmctd_dist.families.maze.data import load_dataset
 
     data_cfg, path = tiny_dataset
     shutil.copytree(path, tmp_path / path.name)

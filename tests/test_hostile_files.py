@@ -91,7 +91,7 @@ def test_train_state_with_code_payload_is_refused_and_never_runs(tmp_path):
 
 
 def test_ant_checkpoints_with_code_payload_are_refused(tmp_path):
-    from fmctd_dist.ant.expert import load_expert
+    from fmctd_dist.families.maze.expert.expert import load_expert
     from fmctd_dist.control.policy.checkpoint import load_policy
     from fmctd_dist.config import REPO_ROOT
 
@@ -173,7 +173,7 @@ BAD_ARRAYS = [
 
 @pytest.mark.parametrize("name, change, message", BAD_ARRAYS, ids=[b[0] for b in BAD_ARRAYS])
 def test_dataset_npz_with_wrong_dtype_or_shape_is_one_dataset_error(tiny_dataset, tmp_path, name, change, message):
-    from fmctd_dist.data.dataset import load_dataset
+    from fmctd_dist.families.maze.data import load_dataset
 
     cfg, dst = copy_dataset(tiny_dataset, tmp_path)
     load_dataset(cfg, dst)  # intact: loads
@@ -184,7 +184,7 @@ def test_dataset_npz_with_wrong_dtype_or_shape_is_one_dataset_error(tiny_dataset
 
 
 def test_dataset_npz_with_object_array_is_refused_unpickled(tiny_dataset, tmp_path):
-    from fmctd_dist.data.dataset import load_dataset
+    from fmctd_dist.families.maze.data import load_dataset
 
     cfg, dst = copy_dataset(tiny_dataset, tmp_path)
     marker = tmp_path / "ran"
@@ -203,7 +203,7 @@ def test_dataset_npz_with_object_array_is_refused_unpickled(tiny_dataset, tmp_pa
 @pytest.mark.parametrize("key, value", [("episodes", {"train": "8", "val": 1}), ("episode_steps", "301"),
                                         ("obs_mean", "10"), ("sha256", ["x"])])
 def test_dataset_manifest_with_wrong_types_is_one_dataset_error(tiny_dataset, tmp_path, key, value):
-    from fmctd_dist.data.dataset import load_dataset
+    from fmctd_dist.families.maze.data import load_dataset
 
     cfg, dst = copy_dataset(tiny_dataset, tmp_path)
     m = json.loads((dst / "manifest.json").read_text())

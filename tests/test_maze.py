@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from fmctd_dist.envs import make_env, maze_geometry
-from fmctd_dist.envs.seeding import check_seed
+from fmctd_dist.families.maze import make_env, maze_geometry
+from fmctd_dist.seeding import check_seed
 from fmctd_dist.errors import ConfigError
 
 # docs/reference.md §9: (init_xy, goal_xy, BFS cell distance) per task
@@ -76,7 +76,7 @@ def test_bad_task_and_seed():
 
 def test_steps_cross_wall_matches_the_cells_and_the_value_uses_it():
     from fmctd_dist.config import load_config
-    from fmctd_dist.hooks.maze import plan_rules
+    from fmctd_dist.families.maze.hooks import plan_rules
     from fmctd_dist.search.actions import scale_actions
 
     geo = maze_geometry("pointmaze-medium")

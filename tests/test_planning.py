@@ -11,8 +11,8 @@ import torch
 from fmctd_dist.config import REPO_ROOT, load_config
 from fmctd_dist.denoiser.local import LocalDenoiser
 from fmctd_dist.diffusion.checkpoint import load_checkpoint, normaliser_from_manifest
-from fmctd_dist.envs import make_env
-from fmctd_dist.evaluation.episode import run_episode
+from fmctd_dist.families.maze import make_env
+from fmctd_dist.families.maze.episode import run_episode
 from fmctd_dist.planners import make_planner, plan_seed
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")

@@ -319,7 +319,7 @@ def test_boundary_loss_in_position_space_sees_only_what_the_readout_reads():
 def test_position_space_on_maze_frames_is_the_token_space():
     """A maze frame is its normalised (x, y), so its readout changes nothing: the boundary loss is the same and
     the position loss is the token loss."""
-    from fmctd_dist.data.dataset import NavigateDataset
+    from fmctd_dist.families.maze.data import NavigateDataset
 
     readout, prov = NavigateDataset(None, {}, None, None).position_readout(tiny_cfg(1))
     x0 = torch.as_tensor(FakeData().windows[:4])

@@ -257,7 +257,7 @@ def test_visual_table_prints_each_lines_settings_and_never_averages_two_configs(
 
     from fmctd_dist.config import load_config
     from fmctd_dist.evaluation.identity import identity_columns
-    from fmctd_dist.evaluation.visual_table import VisualLine, search_statuses, visual_table
+    from fmctd_dist.families.visual.table import VisualLine, search_statuses, visual_table
 
     env = "visual-pointmaze-large"
     plain = identity_columns(load_config([f"env={env}", "method=fast-mctd"]))

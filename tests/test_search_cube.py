@@ -16,7 +16,7 @@ import pytest
 from fakes import FakeDenoiser, assert_golden, make_schedule
 from fmctd_dist.data.tokens import Normaliser, PlanCodec
 from fmctd_dist.search.actions import object_actions
-from fmctd_dist.search.cube_value import PARTIAL, CubeValue
+from fmctd_dist.families.cube.value import PARTIAL, CubeValue
 from fmctd_dist.search.loop import EARLY_STOP, STATUS_ACHIEVED, SearchParams, search
 from fmctd_dist.search.value import ACHIEVED, NOT_REACHED
 

@@ -8,9 +8,9 @@ from conftest import torch_threads, worker_threads
 from fmctd_dist.config import load_config
 from fmctd_dist.denoiser.local import LocalDenoiser
 from fmctd_dist.diffusion.checkpoint import load_checkpoint, normaliser_from_manifest
-from fmctd_dist.envs import make_env
+from fmctd_dist.families.maze import make_env
 from fmctd_dist.errors import CheckpointError
-from fmctd_dist.evaluation.episode import run_episode
+from fmctd_dist.families.maze.episode import run_episode
 from fmctd_dist.planners import make_planner
 
 
@@ -86,7 +86,7 @@ def test_shipped_diffuser_without_its_edge_frames_is_one_clear_error():
 def test_replanning_search_with_the_shipped_cube_model_and_policy_solves_cube_single_task1_seed0(method):
     """Issue 20's smoke test: the shipped cube-single-h5 (Fast-MCTD-Replan) or dense cube-single-h1 (MCTD-Replan)
     model + the shipped cube policy, in process."""
-    from fmctd_dist.hooks import hooks_for
+    from fmctd_dist.family import hooks_for
 
     cfg = load_config([f"method={method}", "env=cube-single"])
     model, manifest = load_checkpoint(cfg.checkpoint_dir(), cfg)

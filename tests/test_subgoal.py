@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from fmctd_dist.control.subgoal import SubgoalTracker
+from fmctd_dist.families.maze.subgoal import SubgoalTracker
 
 
 def straight_plan(n=45, step=0.2):

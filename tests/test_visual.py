@@ -14,8 +14,8 @@ import pytest
 
 from conftest import TINY_DATA
 from fmctd_dist.config import REPO_ROOT, load_config
-from fmctd_dist.data.dataset import load_dataset
-from fmctd_dist.envs.visual_pointmaze import (CAMERA, CAMERA_POS, CAMERA_XYAXES, FrameRenderer, VisualPointMaze,
+from fmctd_dist.families.maze.data import load_dataset
+from fmctd_dist.families.visual.env import (CAMERA, CAMERA_POS, CAMERA_XYAXES, FrameRenderer, VisualPointMaze,
                                               point_env_name, render_states)
 from fmctd_dist.errors import ConfigError, DatasetError, DeviceError
 
@@ -156,7 +156,7 @@ def test_no_gl_is_one_clear_error(monkeypatch):
 def test_visual_env_is_refused_by_maze_only_code():
     """Maze-only code gets one ConfigError naming the visual maze's own jobs, not a crash deeper down."""
     with pytest.raises(ConfigError, match=r"visual maze env \(64x64 images, issue 21\).*jobs/train_visual.py"):
-        from fmctd_dist.envs.maze import maze_geometry
+        from fmctd_dist.families.maze.geometry import maze_geometry
 
         maze_geometry(MEDIUM)
     cfg = load_config([f"env={MEDIUM}"], serves=VISUAL)  # jobs/render_frames.py's door
@@ -172,7 +172,8 @@ def _visual_cfg(root, *extra):
 
 
 def test_frames_store_round_trip(tiny_dataset, tmp_path):
-    from fmctd_dist.data.visual_frames import episode_frames, episode_subset, frames_dir, load_frames, make_frames
+    from fmctd_dist.families.visual.frame_sets import (episode_frames, episode_subset, frames_dir, load_frames,
+                                                       make_frames)
 
     data_cfg, _ = tiny_dataset
     cfg = _visual_cfg(data_cfg.data.root)
@@ -214,12 +215,12 @@ def test_frames_store_round_trip(tiny_dataset, tmp_path):
 
 
 def test_frames_need_the_point_dataset(tmp_path):
-    from fmctd_dist.data.visual_frames import make_frames
+    from fmctd_dist.families.visual.frame_sets import make_frames
 
     with pytest.raises(DatasetError, match="make_dataset.py env=pointmaze-medium"):
         make_frames(_visual_cfg(tmp_path), progress=False)
     with pytest.raises(ConfigError, match="visual.episodes=20 exceeds"):
-        from fmctd_dist.data.visual_frames import episode_subset
+        from fmctd_dist.families.visual.frame_sets import episode_subset
 
         episode_subset(_visual_cfg(tmp_path, "visual.episodes=20"))
 
@@ -249,7 +250,7 @@ def test_a_gl_backend_that_fails_to_load_is_one_error_line(tiny_dataset):
 def test_an_optimizer_after_rendering_does_not_crash_the_process():
     # Mesa's EGL loads LLVM; triton (imported by torch's first optimizer) then segfaulted in the same process.
     # A fresh interpreter, since this test process has already imported torch's compiler stack (conftest).
-    code = ("from fmctd_dist.envs.visual_pointmaze import FrameRenderer\n"
+    code = ("from fmctd_dist.families.visual.env import FrameRenderer\n"
             "import numpy as np, torch\n"
             "FrameRenderer('visual-pointmaze-medium').render(np.zeros((1, 2)))\n"
             "torch.optim.AdamW([torch.nn.Parameter(torch.zeros(2))])\n"

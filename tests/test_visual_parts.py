@@ -18,9 +18,9 @@ import pytest
 
 from conftest import TINY_DATA, torch_threads
 from fmctd_dist.config import REPO_ROOT
-from fmctd_dist.envs.visual_pointmaze import render_states
+from fmctd_dist.families.visual.env import render_states
 from fmctd_dist.errors import CheckpointError, ConfigError, DatasetError
-from fmctd_dist.visual.config import load_parts_args
+from fmctd_dist.families.visual.config import load_parts_args
 
 MEDIUM = "visual-pointmaze-medium"
 TINY_PARTS = ["vae.latent_dim=3", "vae.channels=[8,16,16]", "vae.max_steps=6", "vae.batch_size=8", "vae.val_every=3",
@@ -43,10 +43,10 @@ def _load(root: Path, out: Path, part: str, *extra: str):
 @pytest.fixture(scope="module")
 def pipeline(tiny_dataset, tmp_path_factory):
     """Frames, VAE, episode frames, latents, estimator and inverse dynamics, each trained a few steps."""
-    from fmctd_dist.data.visual_frames import make_frames
-    from fmctd_dist.visual.latents import make_latents
-    from fmctd_dist.visual.train_head import train_head
-    from fmctd_dist.visual.train_vae import train_vae
+    from fmctd_dist.families.visual.frame_sets import make_frames
+    from fmctd_dist.families.visual.latents import make_latents
+    from fmctd_dist.families.visual.train_head import train_head
+    from fmctd_dist.families.visual.train_vae import train_vae
 
     data_cfg, _ = tiny_dataset
     root, out = Path(data_cfg.data.root), tmp_path_factory.mktemp("parts")
@@ -76,7 +76,7 @@ def test_each_part_trains_and_records_its_quality(pipeline):
 
 def test_reach_runs_closed_loop_and_is_recorded(pipeline):
     """Two 5-step segments through the renderer; the true-position reference follows its path exactly."""
-    from fmctd_dist.visual.reach import run_reach
+    from fmctd_dist.families.visual.reach import run_reach
 
     with torch_threads(1):
         got = run_reach(pipeline["cfg"], pipeline["pcfg"], progress=False)["reach"]
@@ -84,14 +84,14 @@ def test_reach_runs_closed_loop_and_is_recorded(pipeline):
     assert got["true_positions"]["reach_rate"] == 1.0
     m = json.loads((pipeline["out"] / "invdyn" / "manifest.json").read_text())
     assert m["metrics"]["reach"] == got
-    from fmctd_dist.visual.load import load_invdyn, load_vae
+    from fmctd_dist.families.visual.load import load_invdyn, load_vae
 
     load_invdyn(pipeline["out"] / "invdyn", MEDIUM, load_vae(pipeline["out"] / "vae", MEDIUM))  # sha still holds
 
 
 def test_vae_resumes_to_the_same_weights(pipeline, tmp_path):
     """3 steps, stop, 3 more == the fixture's uninterrupted 6 (same thread count)."""
-    from fmctd_dist.visual.train_vae import train_vae
+    from fmctd_dist.families.visual.train_vae import train_vae
 
     root, out = pipeline["root"], tmp_path
     with torch_threads(1):
@@ -107,8 +107,8 @@ def test_vae_resumes_to_the_same_weights(pipeline, tmp_path):
 
 def test_store_round_trip_state_image_latent(pipeline):
     """The latent store's latents = the VAE applied to frames rendered afresh from the dataset's states."""
-    from fmctd_dist.visual.latents import load_latents, make_latents
-    from fmctd_dist.visual.load import load_vae
+    from fmctd_dist.families.visual.latents import load_latents, make_latents
+    from fmctd_dist.families.visual.load import load_vae
 
     cfg, pcfg = pipeline["cfg"], pipeline["pcfg"]
     path, m = pipeline["latents"]
@@ -116,8 +116,8 @@ def test_store_round_trip_state_image_latent(pipeline):
     store = load_latents(cfg, pcfg, vae)
     s = store.split("train")
     assert s["mu"].shape == (1, 301, 3) and store.manifest["vae"]["digest"] == vae.digest
-    from fmctd_dist.data.dataset import load_dataset
-    from fmctd_dist.data.visual_frames import episode_subset, point_config
+    from fmctd_dist.families.maze.data import load_dataset
+    from fmctd_dist.families.visual.frame_sets import episode_subset, point_config
 
     data = load_dataset(point_config(cfg))
     e = int(episode_subset(cfg)[0])
@@ -144,7 +144,7 @@ def test_store_round_trip_state_image_latent(pipeline):
 
 
 def test_loaders_refuse_bad_inputs(pipeline, tiny_checkpoint, tmp_path):
-    from fmctd_dist.visual.load import load_estimator, load_invdyn, load_vae
+    from fmctd_dist.families.visual.load import load_estimator, load_invdyn, load_vae
 
     out = pipeline["out"]
     vae = load_vae(out / "vae", MEDIUM)
@@ -169,7 +169,7 @@ def test_loaders_refuse_bad_inputs(pipeline, tiny_checkpoint, tmp_path):
         load_invdyn(tmp_path / "none", MEDIUM, vae)
     other = tmp_path / "vae2"  # the same VAE retrained with another seed: heads of the first are refused
     with torch_threads(1):
-        from fmctd_dist.visual.train_vae import train_vae
+        from fmctd_dist.families.visual.train_vae import train_vae
 
         train_vae(*_load(pipeline["root"], tmp_path, "vae", f"vae.out={other}", "vae.seed=1", "vae.max_steps=1"),
                   progress=False)
@@ -205,10 +205,10 @@ def test_train_visual_job_names_the_missing_frames(tmp_path):
 def test_episodes_skip_what_another_process_rendered(tiny_dataset, tmp_path, monkeypatch):
     """Two processes may share `part=episodes` (one from each end of the list): an episode whose file
     appears while this one renders is kept as it is, not rendered again, and still enters the digest."""
-    from fmctd_dist.data.dataset import dataset_dir
+    from fmctd_dist.families.maze.data import dataset_dir
     from fmctd_dist.data.npz import load_npz, save_npz
-    from fmctd_dist.data.visual_frames import point_config
-    from fmctd_dist.visual import episodes as ep
+    from fmctd_dist.families.visual.frame_sets import point_config
+    from fmctd_dist.families.visual import episodes as ep
 
     data_cfg, path = tiny_dataset
     (tmp_path / path.name).symlink_to(path)  # the point dataset, under this test's own data root

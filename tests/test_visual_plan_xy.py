@@ -1,4 +1,4 @@
-"""visual.plan_xy: the visual planner on [z, estimated x, y] frames (fmctd_dist/visual/frames_xy.py).
+"""visual.plan_xy: the visual planner on [z, estimated x, y] frames (fmctd_dist/families/visual/frames_xy.py).
 
 The frames, the dataset, the readout guidance and value use, widening a latent model's weights to the
 new frames (train.init_from), the checks that keep a [z, x, y] model and a latent config apart, and a
@@ -26,7 +26,7 @@ needs_parts = pytest.mark.skipif(not (SHIPPED / "model.pt").exists() or not (EST
 
 
 def _estimator():
-    from fmctd_dist.visual.guide import Positions, load_estimator_net
+    from fmctd_dist.families.visual.guide import Positions, load_estimator_net
 
     net, m = load_estimator_net(load_config([f"env={MEDIUM}"]), _vae_digest(), 8)
     return Positions(net), str(m["digest"])
@@ -38,8 +38,8 @@ def _vae_digest() -> str:
 
 def _fake_xy_dataset(episodes: int = 2, steps: int = 1001):
     """A store of random 8-D latents, framed as visual.plan_xy frames with the shipped estimator."""
-    from fmctd_dist.data.visual_dataset import VisualLatentDataset
-    from fmctd_dist.visual.frames_xy import PlanFrames
+    from fmctd_dist.families.visual.dataset import VisualLatentDataset
+    from fmctd_dist.families.visual.frames_xy import PlanFrames
 
     pos, digest = _estimator()
     rng = np.random.default_rng(0)
@@ -63,7 +63,7 @@ def test_plan_xy_adds_two_numbers_per_frame_and_only_on_visual_mazes():
 
 
 def test_plan_frames_carry_the_estimators_position_and_give_back_the_latent():
-    from fmctd_dist.visual.frames_xy import PlanFrames
+    from fmctd_dist.families.visual.frames_xy import PlanFrames
 
     est = lambda z: np.stack([z[..., 0] * 2.0, z[..., 1] - 1.0], axis=-1)  # noqa: E731 - a toy estimator
     z = np.arange(24, dtype=np.float32).reshape(3, 8)
@@ -133,7 +133,7 @@ def test_a_widened_model_plans_an_episode_and_configs_must_match_it(tmp_path):
     from fmctd_dist.denoiser.local import LocalDenoiser
     from fmctd_dist.diffusion.checkpoint import normaliser_from_manifest, read_manifest
     from fmctd_dist.diffusion.train import train
-    from fmctd_dist.hooks import hooks_for
+    from fmctd_dist.family import hooks_for
     from fmctd_dist.planners import make_planner
 
     out = tmp_path / "xy-h5"
@@ -176,7 +176,7 @@ def test_fast_mctd_with_the_shipped_xy_model_solves_task3_seed0():
     smoke test, it does not solve (it solves task 1 seeds 1, 5 and 6)."""
     from fmctd_dist.denoiser.local import LocalDenoiser
     from fmctd_dist.diffusion.checkpoint import normaliser_from_manifest, read_manifest
-    from fmctd_dist.hooks import hooks_for
+    from fmctd_dist.family import hooks_for
     from fmctd_dist.planners import make_planner
 
     cfg = load_config([f"env={MEDIUM}", "method=fast-mctd", "visual.episodes=100", "visual.plan_xy=true",
@@ -192,7 +192,7 @@ def test_an_xy_model_of_another_estimator_is_one_clear_error(tmp_path):
     """A [z, x, y] planner whose frames carry another estimator's (x, y) than the one loaded: refused by name."""
     import shutil
 
-    from fmctd_dist.hooks import hooks_for
+    from fmctd_dist.family import hooks_for
 
     other = tmp_path / "xy-other"
     shutil.copytree(XY, other)

@@ -26,8 +26,8 @@ needs_shipped = pytest.mark.skipif(not (SHIPPED / "model.pt").exists(), reason=f
 
 def _default_store() -> Path:
     """The latent store of the default medium config (visual.episodes from its env yaml)."""
-    from fmctd_dist.visual.config import PartsConfig
-    from fmctd_dist.visual.latents import latents_dir
+    from fmctd_dist.families.visual.config import PartsConfig
+    from fmctd_dist.families.visual.latents import latents_dir
 
     vae = json.loads((REPO_ROOT / f"checkpoints/{MEDIUM}-vae/manifest.json").read_text())["digest"]
     return latents_dir(load_config([f"env={MEDIUM}"]), PartsConfig(), vae) / "latents.npz"
@@ -39,7 +39,7 @@ needs_latents = pytest.mark.skipif(not _default_store().exists(),
 
 
 def _fake_dataset(d: int = 8, episodes: int = 2, steps: int = 1001):
-    from fmctd_dist.data.visual_dataset import VisualLatentDataset
+    from fmctd_dist.families.visual.dataset import VisualLatentDataset
 
     rng = np.random.default_rng(0)
     z = rng.normal(size=(episodes, steps, d)).astype(np.float32)
@@ -73,7 +73,7 @@ def test_latent_windows_have_the_planner_shape(jump, tokens):
                     reason="the medium estimator is not shipped")
 def test_position_readout_reads_latent_frames_as_the_estimator_does():
     """train.boundary_space=position on latents: normalised frames -> the estimator's standardised (x, y)."""
-    from fmctd_dist.visual.guide import Positions, load_estimator_net
+    from fmctd_dist.families.visual.guide import Positions, load_estimator_net
 
     cfg = load_config([f"env={MEDIUM}", "jump=1"], method="mctd")
     ds = _fake_dataset()
@@ -88,18 +88,18 @@ def test_position_readout_reads_latent_frames_as_the_estimator_does():
 
 def test_visual_env_trains_and_evaluates_now():
     """The visual family is no longer refused by train / eval; a maze-only part still names the visual code."""
-    from fmctd_dist.envs.maze import maze_geometry
-    from fmctd_dist.hooks import hooks_for
+    from fmctd_dist.families.maze.geometry import maze_geometry
+    from fmctd_dist.family import hooks_for
 
     assert load_config([f"env={MEDIUM}"]).env.name == MEDIUM
-    assert hooks_for(MEDIUM).__name__ == "fmctd_dist.hooks.visual"
+    assert hooks_for(MEDIUM).__name__ == "fmctd_dist.families.visual.hooks"
     with pytest.raises(ConfigError, match="jobs/train.py env=visual-pointmaze-medium jump=5"):
         maze_geometry(MEDIUM)
 
 
 def _guide(seed: int = 0):
-    from fmctd_dist.visual.guide import EstimatorGuide
-    from fmctd_dist.visual.mlp import build_mlp
+    from fmctd_dist.families.visual.guide import EstimatorGuide
+    from fmctd_dist.families.visual.mlp import build_mlp
 
     net = build_mlp(8, 2, [16, 16], seed)
     g = torch.Generator().manual_seed(seed)
@@ -161,8 +161,8 @@ def test_guided_denoiser_moves_estimated_positions_toward_the_goal():
 
 
 def test_latent_controller_targets_interpolate_the_sparse_plan():
-    from fmctd_dist.control.latent_path import LatentPathController, latent_targets
-    from fmctd_dist.control.pd import repeat_waypoints
+    from fmctd_dist.families.visual.latent_path import LatentPathController, latent_targets
+    from fmctd_dist.families.maze.pd import repeat_waypoints
 
     plan = np.array([[1.0, 0.0], [2.0, 1.0]])
     t = latent_targets(repeat_waypoints(plan, 5), 5, np.zeros(2))
@@ -196,7 +196,7 @@ def _copy_planner(tmp_path: Path, **edits) -> Path:
 @needs_shipped
 def test_bad_inputs_are_one_clear_error_each(tmp_path):
     """Checked by the hooks in the job process (grid.prepare calls check_episodes first): one error each."""
-    from fmctd_dist.hooks import hooks_for
+    from fmctd_dist.family import hooks_for
 
     hooks = hooks_for(MEDIUM)
     cfg = load_config([f"env={MEDIUM}", "jump=5"])
@@ -239,7 +239,7 @@ def test_fast_mctd_solves_task1_seed0_with_the_shipped_models():
     """
     from fmctd_dist.denoiser.local import LocalDenoiser
     from fmctd_dist.diffusion.checkpoint import normaliser_from_manifest, read_manifest
-    from fmctd_dist.hooks import hooks_for
+    from fmctd_dist.family import hooks_for
     from fmctd_dist.planners import make_planner
 
     cfg = load_config([f"env={MEDIUM}", "method=fast-mctd", "env.warp_sparse=8.0"])
@@ -299,7 +299,7 @@ def test_context_probe_plans_on_the_maze_and_jump_it_is_given(monkeypatch, words
 @needs_latents
 def test_plan_quality_reports_warps_and_manifold_distance():
     """jobs/probes/visual_plan_quality.py's measure on a small search: shapes and ranges of every statistic."""
-    from fmctd_dist.visual.plan_quality import nearest_distance, plan_quality
+    from fmctd_dist.families.visual.plan_quality import nearest_distance, plan_quality
 
     assert nearest_distance(np.array([[0.0, 0.0], [3.0, 4.0]]), np.array([[0.0, 1.0], [3.0, 0.0]])).tolist() == [1, 4]
     cfg = load_config([f"env={MEDIUM}", "method=fast-mctd", "method.budget=10", "method.parallel=5"])

@@ -1,8 +1,5 @@
-"""Low-level control: the PD waypoint follower that executes PointMaze plans, and the subgoal
-schedule + plan controller that feed a goal-conditioned policy on AntMaze."""
+"""Low-level control shared by the families: the learned goal-conditioned policy (``policy/``).
 
-from fmctd_dist.control.ant_controller import AntPlanController, PlanRun, run_plan
-from fmctd_dist.control.pd import PDController, repeat_waypoints
-from fmctd_dist.control.subgoal import SubgoalTracker
-
-__all__ = ["AntPlanController", "PDController", "PlanRun", "SubgoalTracker", "repeat_waypoints", "run_plan"]
+The families' own controllers live in their packages (the maze's PD follower and ant subgoal
+controller in :mod:`fmctd_dist.families.maze`, the arm's scripts in :mod:`fmctd_dist.families.cube`).
+"""

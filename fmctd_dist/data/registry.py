@@ -13,14 +13,14 @@ from pathlib import Path
 from typing import Any
 
 from fmctd_dist.config import Config
-from fmctd_dist.families import family, require_family
+from fmctd_dist.registry import family, require_family
 
 # family -> (module, make function, load function)
 DATA_MODULES: dict[str, tuple[str, str, str]] = {
-    "pointmaze": ("fmctd_dist.data.dataset", "make_dataset", "load_dataset"),
-    "antmaze": ("fmctd_dist.data.dataset", "make_dataset", "load_dataset"),
-    "cube": ("fmctd_dist.data.cube_dataset", "make_cube_dataset", "load_cube_dataset"),
-    "visual-pointmaze": ("fmctd_dist.data.visual_dataset", "make_visual_dataset", "load_visual_dataset"),
+    "pointmaze": ("fmctd_dist.families.maze.data", "make_dataset", "load_dataset"),
+    "antmaze": ("fmctd_dist.families.maze.data", "make_dataset", "load_dataset"),
+    "cube": ("fmctd_dist.families.cube.data", "make_cube_dataset", "load_cube_dataset"),
+    "visual-pointmaze": ("fmctd_dist.families.visual.dataset", "make_visual_dataset", "load_visual_dataset"),
 }
 
 

@@ -53,7 +53,7 @@ class LocalDenoiser:
         """Load and verify a checkpoint against ``cfg`` (device/micro_batch default to cfg's); ``warn=False``:
         no emulated-bf16 warning on stderr (Ray actors return it in their info instead)."""
         from fmctd_dist.diffusion.checkpoint import load_checkpoint
-        from fmctd_dist.hooks import guide_map_for
+        from fmctd_dist.family import guide_map_for
 
         model, manifest = load_checkpoint(path, cfg, expect_digest)
         return cls(model, cfg.diffusion, device or cfg.device, micro_batch or cfg.ray.micro_batch, manifest["digest"],

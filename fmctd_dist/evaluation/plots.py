@@ -13,7 +13,7 @@ from matplotlib.ticker import FormatStrFormatter, LogLocator, MaxNLocator, NullF
 import numpy as np  # noqa: E402
 
 from fmctd_dist.config import ENV_NAMES  # noqa: E402
-from fmctd_dist.envs.maze import MAZE_UNIT, MazeGeometry  # noqa: E402
+from fmctd_dist.families.maze.geometry import MAZE_UNIT, MazeGeometry  # noqa: E402
 from fmctd_dist.evaluation.results import label  # noqa: E402
 
 

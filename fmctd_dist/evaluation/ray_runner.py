@@ -45,7 +45,7 @@ from tqdm.auto import tqdm
 from fmctd_dist.config import Config, load_config
 from fmctd_dist.denoiser.ray_pool import DenoiserPool, RayDenoiser, auto_actors, unwrap_ray_error
 from fmctd_dist.errors import ConfigError, DeviceError
-from fmctd_dist.evaluation.episode import describe
+from fmctd_dist.families.maze.episode import describe
 from fmctd_dist.evaluation.grid import Prepared, grid, missing, prepare, provenance
 from fmctd_dist.evaluation.results import ResultStore
 from fmctd_dist.planners.base import PlanOutput
@@ -108,7 +108,7 @@ class EnvActor:
     """Runs whole episodes (the env family's env + controller) and returns their rows; prints nothing."""
 
     def __init__(self, prepared: Prepared, driver):
-        from fmctd_dist.hooks import hooks_for
+        from fmctd_dist.family import hooks_for
 
         _one_thread()
         self.cfg, self.prepared = prepared.cfg, prepared

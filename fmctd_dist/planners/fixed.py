@@ -3,7 +3,7 @@
 Diffusion Forcing (pyramid rows) and Diffuser (all plan tokens at one level per row) differ
 only in that schedule, so both are this class with a different ``levels`` table. The guidance
 (scale and guided dims) and what the sampled plan becomes (cubes: the un-guided cubes pinned)
-come from the env family (:func:`fmctd_dist.hooks.hooks_for`).
+come from the env family (:func:`fmctd_dist.family.hooks_for`).
 """
 
 from __future__ import annotations
@@ -13,10 +13,10 @@ import time
 import numpy as np
 
 from fmctd_dist.config import Config
-from fmctd_dist.control.pd import repeat_waypoints
+from fmctd_dist.families.maze.pd import repeat_waypoints
 from fmctd_dist.data.tokens import Normaliser, PlanCodec
 from fmctd_dist.denoiser.protocol import DenoiseBatch, Denoiser
-from fmctd_dist.hooks import hooks_for
+from fmctd_dist.family import hooks_for
 from fmctd_dist.planners.base import PlanOutput
 from fmctd_dist.search.loop import initial_noise
 

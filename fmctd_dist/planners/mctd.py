@@ -3,7 +3,7 @@
 K (``method.parallel``), w, RAS, leaf parallelisation and H (``jump``, which also picks the
 sparse checkpoint) are config; this class only wires the schedule, codec and denoiser into
 :func:`fmctd_dist.search.search`, with the action set and plan value the env family gives for
-each call (:func:`fmctd_dist.hooks.hooks_for`), and expands a sparse plan to one waypoint per env step.
+each call (:func:`fmctd_dist.family.hooks_for`), and expands a sparse plan to one waypoint per env step.
 """
 
 from __future__ import annotations
@@ -13,11 +13,11 @@ import time
 import numpy as np
 
 from fmctd_dist.config import Config
-from fmctd_dist.control.pd import repeat_waypoints
+from fmctd_dist.families.maze.pd import repeat_waypoints
 from fmctd_dist.data.tokens import Normaliser, PlanCodec
 from fmctd_dist.denoiser.protocol import Denoiser
 from fmctd_dist.diffusion.schedule import PyramidSchedule
-from fmctd_dist.hooks import hooks_for
+from fmctd_dist.family import hooks_for
 from fmctd_dist.planners.base import PlanOutput
 from fmctd_dist.search.loop import SearchParams, search
 

@@ -10,8 +10,8 @@ import sys
 import numpy as np
 
 from fmctd_dist.cli import run
-from fmctd_dist.data.oracle import NoisyOracle
-from fmctd_dist.envs import make_env
+from fmctd_dist.families.maze.oracle import NoisyOracle
+from fmctd_dist.families.maze import make_env
 
 BUDGET = {"pointmaze-medium": 500, "pointmaze-large": 500, "pointmaze-giant": 1000}
 

@@ -20,8 +20,8 @@ import numpy as np
 
 from fmctd_dist.cli import run
 from fmctd_dist.config import load_config
-from fmctd_dist.envs.maze import maze_geometry
-from fmctd_dist.envs.visual_pointmaze import CAMERA, REFERENCE_SHADOWSIZE, FrameRenderer, point_env_name
+from fmctd_dist.families.maze.geometry import maze_geometry
+from fmctd_dist.families.visual.env import CAMERA, REFERENCE_SHADOWSIZE, FrameRenderer, point_env_name
 from fmctd_dist.errors import ConfigError
 
 ARMS = [(CAMERA, REFERENCE_SHADOWSIZE), (CAMERA, 1024), (None, REFERENCE_SHADOWSIZE), (None, 1024)]

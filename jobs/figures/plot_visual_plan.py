@@ -24,10 +24,10 @@ from fmctd_dist.config import REPO_ROOT, load_config  # noqa: E402
 from fmctd_dist.denoiser.local import LocalDenoiser  # noqa: E402
 from fmctd_dist.device import set_threads  # noqa: E402
 from fmctd_dist.diffusion.checkpoint import normaliser_from_manifest, read_manifest  # noqa: E402
-from fmctd_dist.envs.maze import maze_geometry  # noqa: E402
-from fmctd_dist.envs.visual_pointmaze import point_env_name, render_states  # noqa: E402
+from fmctd_dist.families.maze.geometry import maze_geometry  # noqa: E402
+from fmctd_dist.families.visual.env import point_env_name, render_states  # noqa: E402
 from fmctd_dist.evaluation.plots import draw_maze  # noqa: E402
-from fmctd_dist.hooks import hooks_for  # noqa: E402
+from fmctd_dist.family import hooks_for  # noqa: E402
 from fmctd_dist.planners import make_planner  # noqa: E402
 
 SHOWN = 5  # plan frames shown between the start and the goal

@@ -18,10 +18,10 @@ import numpy as np  # noqa: E402
 from fmctd_dist.cli import run  # noqa: E402
 from fmctd_dist.config import REPO_ROOT  # noqa: E402
 from fmctd_dist.device import set_threads  # noqa: E402
-from fmctd_dist.visual.config import load_parts_args, part_dir  # noqa: E402
-from fmctd_dist.visual.frames import load_frame_set  # noqa: E402
-from fmctd_dist.visual.latents import vae_dir  # noqa: E402
-from fmctd_dist.visual.load import load_estimator, load_vae  # noqa: E402
+from fmctd_dist.families.visual.config import load_parts_args, part_dir  # noqa: E402
+from fmctd_dist.families.visual.frames import load_frame_set  # noqa: E402
+from fmctd_dist.families.visual.latents import vae_dir  # noqa: E402
+from fmctd_dist.families.visual.load import load_estimator, load_vae  # noqa: E402
 
 FRAMES = 8
 

@@ -6,7 +6,7 @@
 The planner is replaced by an arc: the first cube the value's rules call unsolved goes from
 where it is to its goal in 60 env steps after a 20-step hold (for the grasp), lifted by
 min(1.0, xy distance) at mid-way; every other cube stays. Everything else is the evaluation's
-cube episode (``evaluation/cube_episode.py``: target choice, pre-position, subgoals, release,
+cube episode (``families/cube/episode.py``: target choice, pre-position, subgoals, release,
 ``env.replan_every``) with the policy of ``env.policy``. A failure here is the policy's or the
 episode loop's, not the diffusion model's, which is what the robot table's failure analysis
 needs to tell apart. The arc knows no stacking order and no free spot, so tasks that need
@@ -23,12 +23,12 @@ import numpy as np
 from fmctd_dist.cli import run
 from fmctd_dist.config import load_config
 from fmctd_dist.control.policy.checkpoint import load_policy
-from fmctd_dist.envs.cube import CubeEpisodes
-from fmctd_dist.evaluation.cube_episode import run_cube_episode
-from fmctd_dist.families import require_family
-from fmctd_dist.hooks.cube import policy_dir
+from fmctd_dist.families.cube.env import CubeEpisodes
+from fmctd_dist.families.cube.episode import run_cube_episode
+from fmctd_dist.registry import require_family
+from fmctd_dist.families.cube.hooks import policy_dir
 from fmctd_dist.planners.base import PlanOutput
-from fmctd_dist.search.cube_value import CubeValue
+from fmctd_dist.families.cube.value import CubeValue
 
 HOLD, MOVE, FRAMES = 20, 60, 100  # env steps: wait for the grasp, carry, plan length
 

@@ -6,7 +6,7 @@
 Runs the episode in process exactly as jobs/eval.py does (same plans, same row) while recording what
 the low-level policy saw and did at each of its steps: the gripper opening and contact flag of the
 observation, effector and target cube xyz, the subgoal, and the 5-D action (xyz, yaw, gripper). A
-``dropped`` row (evaluation/cube_failures.py) says the cube came down away from its goal; this says
+``dropped`` row (families/cube/failures.py) says the cube came down away from its goal; this says
 at which policy step contact was lost and what the arm was doing then. ``steps=A:B`` picks the
 policy steps printed (default: all). Prints one line per policy step, then the row's outcome.
 """
@@ -19,13 +19,13 @@ import numpy as np
 
 from fmctd_dist.cli import run
 from fmctd_dist.config import load_config
-from fmctd_dist.control.cube_scripts import EFFECTOR
+from fmctd_dist.families.cube.scripts import EFFECTOR
 from fmctd_dist.denoiser.local import LocalDenoiser
 from fmctd_dist.device import set_threads
 from fmctd_dist.diffusion.checkpoint import normaliser_from_manifest, read_manifest
 from fmctd_dist.errors import ConfigError
 from fmctd_dist.evaluation.grid import prepare
-from fmctd_dist.hooks import hooks_for
+from fmctd_dist.family import hooks_for
 from fmctd_dist.planners import make_planner
 
 GRIP, CONTACT = 17, 18  # the arm observation's gripper opening and contact flag (docs/reference.md §13)

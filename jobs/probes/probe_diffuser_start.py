@@ -18,7 +18,7 @@ if len(sys.argv) < 2 or wants_help(sys.argv[1:]):
 import numpy as np, torch  # noqa: E401,E402
 from fmctd_dist.config import load_config
 from fmctd_dist.diffusion.checkpoint import load_checkpoint
-from fmctd_dist.data.dataset import load_dataset
+from fmctd_dist.families.maze.data import load_dataset
 from fmctd_dist.data.windows import train_data
 from fmctd_dist.diffusion.train import DiffuserLoss
 torch.set_num_threads(1)
@@ -52,7 +52,7 @@ with torch.no_grad():
 # step after it, per task, for noise seeds 0-2 (the warp threshold is 1.0).
 from fmctd_dist.denoiser.local import LocalDenoiser  # noqa: E402
 from fmctd_dist.diffusion.checkpoint import normaliser_from_manifest  # noqa: E402
-from fmctd_dist.envs import make_env  # noqa: E402
+from fmctd_dist.families.maze import make_env  # noqa: E402
 from fmctd_dist.planners import make_planner  # noqa: E402
 
 env = make_env(cfg.env.name)

@@ -27,13 +27,13 @@ import numpy as np
 
 from fmctd_dist.cli import run
 from fmctd_dist.device import set_threads
-from fmctd_dist.visual.plan_quality import probe_config, task_frames, visual_planner
+from fmctd_dist.families.visual.plan_quality import probe_config, task_frames, visual_planner
 
 WINDOWS = 20  # validation starts
 
 
 def main(argv: list[str]) -> int:
-    from fmctd_dist.data.visual_dataset import load_visual_dataset
+    from fmctd_dist.families.visual.dataset import load_visual_dataset
 
     cfg = probe_config(argv)
     set_threads(cfg.eval.threads or 1)

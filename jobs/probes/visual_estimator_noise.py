@@ -20,18 +20,18 @@ import torch
 from fmctd_dist.cli import run
 from fmctd_dist.config import Config, load_config
 from fmctd_dist.device import set_threads
-from fmctd_dist.visual.guide import Positions
-from fmctd_dist.visual.mlp import build_mlp
-from fmctd_dist.visual.plan_quality import TaskSearch, estimated_steps, search_task, visual_planner
+from fmctd_dist.families.visual.guide import Positions
+from fmctd_dist.families.visual.mlp import build_mlp
+from fmctd_dist.families.visual.plan_quality import TaskSearch, estimated_steps, search_task, visual_planner
 
 SIGMAS = (0.0, 0.1, 0.3, 0.6)  # noise std in units of each latent dimension's std over the train latents
 WARP = 2.0  # the maze's sparse warp threshold, on estimated positions
 
 
 def store_arrays(cfg: Config) -> dict[str, np.ndarray]:
-    from fmctd_dist.data.visual_dataset import _parts
-    from fmctd_dist.visual.latents import load_latents, vae_dir
-    from fmctd_dist.visual.load import load_vae
+    from fmctd_dist.families.visual.dataset import _parts
+    from fmctd_dist.families.visual.latents import load_latents, vae_dir
+    from fmctd_dist.families.visual.load import load_vae
 
     pcfg = _parts(cfg)
     store = load_latents(cfg, pcfg, load_vae(vae_dir(cfg, pcfg), cfg.env.name))

@@ -7,7 +7,7 @@ The "plan" of each call is the BFS cell path from the task's start cell to its g
 point's speed (0.2 per step, as ``jobs/figures/plot_visual_frames.py`` draws it), rendered and encoded by
 the VAE: on the latent manifold by construction. It is cut every ``jump`` steps and held ``jump``
 steps per frame, as a sparse plan is, then run by the visual episode (chase-camera frames, VAE,
-inverse dynamics toward the latents, ``evaluation/visual_episode.py``) with nothing else changed.
+inverse dynamics toward the latents, ``families/visual/episode.py``) with nothing else changed.
 Prints one line per episode and the success count.
 """
 
@@ -19,11 +19,11 @@ import numpy as np
 
 from fmctd_dist.cli import run
 from fmctd_dist.config import load_config
-from fmctd_dist.control.pd import repeat_waypoints
+from fmctd_dist.families.maze.pd import repeat_waypoints
 from fmctd_dist.device import set_threads
-from fmctd_dist.envs.maze import maze_geometry
-from fmctd_dist.envs.visual_pointmaze import point_env_name, render_states
-from fmctd_dist.hooks import hooks_for
+from fmctd_dist.families.maze.geometry import maze_geometry
+from fmctd_dist.families.visual.env import point_env_name, render_states
+from fmctd_dist.family import hooks_for
 from fmctd_dist.planners.base import PlanOutput
 
 

@@ -7,7 +7,7 @@
 One search per task from the start frame to the goal frame (no control); per task the share of
 plans that warp, the median largest and first step, the closest approach to the goal, and the
 median distance of plan latents to the nearest real latent, beside that distance for held-out
-real latents (``fmctd_dist/visual/plan_quality.py``). Prints a table and the JSON.
+real latents (``fmctd_dist/families/visual/plan_quality.py``). Prints a table and the JSON.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ import json
 from fmctd_dist.cli import run
 from fmctd_dist.config import load_config
 from fmctd_dist.device import set_threads
-from fmctd_dist.visual.plan_quality import plan_quality
+from fmctd_dist.families.visual.plan_quality import plan_quality
 
 
 def main(argv: list[str]) -> int:

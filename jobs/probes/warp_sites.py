@@ -4,7 +4,7 @@
 
 The value zeroes a plan with any step over the warp limit (0.75 + 0.25 H), and its first step is
 start -> first plan frame (docs/reference.md §4). For each checkpoint, on the noise of the quality table
-(20 plans per task start, unguided and guided; fmctd_dist.evaluation.plan_quality.sample_plans):
+(20 plans per task start, unguided and guided; fmctd_dist.families.maze.plan_quality.sample_plans):
 the share of warp-free plans, where the warps sit (first step, later token boundaries, inside
 tokens), the plans whose only warp is the first step, and per task the warp-free share. Then the
 first step from starts the tasks do not pick: 100 seeded validation-window starts (beside the
@@ -25,8 +25,8 @@ from fmctd_dist.config import Config, config_from_dict
 from fmctd_dist.data.tokens import PlanCodec
 from fmctd_dist.denoiser.local import LocalDenoiser
 from fmctd_dist.diffusion.checkpoint import load_checkpoint, normaliser_from_manifest
-from fmctd_dist.envs import maze_geometry
-from fmctd_dist.evaluation.plan_quality import SAMPLES_PER_TASK, sample_plans
+from fmctd_dist.families.maze import maze_geometry
+from fmctd_dist.families.maze.plan_quality import SAMPLES_PER_TASK, sample_plans
 
 VAL_STARTS = 100
 
@@ -72,7 +72,7 @@ def warp_sites(ckpt: Path, samples_per_task: int = SAMPLES_PER_TASK, val_starts:
         out[name]["first_step"] = float(steps[:, 0].mean())
         out[name]["per_task"] = [float((steps[k * n:(k + 1) * n].max(1) <= warp).mean()) for k in range(len(geo.tasks))]
 
-    from fmctd_dist.data.dataset import load_dataset
+    from fmctd_dist.families.maze.data import load_dataset
 
     val = load_dataset(cfg).val  # [E, S, d] positions
     rng = np.random.default_rng(0)

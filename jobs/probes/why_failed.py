@@ -22,8 +22,8 @@ from pathlib import Path
 
 from fmctd_dist.cli import run
 from fmctd_dist.errors import ConfigError
-from fmctd_dist.evaluation.cube_failure_report import failure_line, has_reasons, reason_table
-from fmctd_dist.evaluation.diagnose import failures
+from fmctd_dist.families.cube.failure_report import failure_line, has_reasons, reason_table
+from fmctd_dist.families.maze.diagnose import failures
 from fmctd_dist.evaluation.results import ResultStore
 
 

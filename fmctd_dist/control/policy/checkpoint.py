@@ -20,7 +20,7 @@ from fmctd_dist.control.policy.spec import PolicySpec
 from fmctd_dist.control.policy.specs import BY_KIND, spec_for_env
 from fmctd_dist.diffusion.checkpoint import first_line, read_weights_manifest, save_weights, sha256_file
 from fmctd_dist.errors import CheckpointError
-from fmctd_dist.families import family
+from fmctd_dist.registry import family
 
 FORMAT_VERSION = 1
 MODEL_FILE = "model.pt"

@@ -1,6 +1,6 @@
 """Config of the goal-conditioned policy (ant, cube): ``policy.*`` (network, data, training), ``reach.*`` (its test).
 
-A config of its own, like the expert's (:mod:`fmctd_dist.ant.config`): the planner's config
+A config of its own, like the expert's (:mod:`fmctd_dist.families.maze.expert.config`): the planner's config
 digest is recorded with every result row, and training a low-level policy must not change
 it. The dataset is still named by the planner's keys (``env=``, ``data.root``,
 ``data.episodes``, ...), so a job's words are split: ``policy.*`` / ``reach.*`` go here,
@@ -36,7 +36,7 @@ class PolicyTrainConfig:
     hidden: list[int] = field(default_factory=lambda: [256, 256, 256])  # MLP widths, each Linear -> LayerNorm -> ReLU
     # Hindsight subgoal of row t = the ant's x, y at t + k, k = the sum of geom_draws Geometric(geom_p) draws
     # (each >= 1), cut at the episode's (or the upright run's) end. 2 x Geometric(0.2): mean 10 steps, mode 5-6,
-    # 90% within 2..19 steps (see fmctd_dist.control.policy.ant_data.sample_offsets).
+    # 90% within 2..19 steps (see fmctd_dist.families.maze.ant_policy_rows.sample_offsets).
     geom_p: float = 0.2
     geom_draws: int = 2
     max_subgoal_dist: float = 4.0  # the relative subgoal's norm is clipped here (input and training); 0 = no clip

@@ -10,8 +10,8 @@ from typing import Any
 
 from fmctd_dist.control.policy.specs import spec_for_env
 
-HOOKS = {"antmaze": ("fmctd_dist.control.policy.ant_train", "AntHooks"),
-         "cube": ("fmctd_dist.control.policy.cube_train", "CubeHooks")}  # imported on first use
+HOOKS = {"antmaze": ("fmctd_dist.families.maze.ant_policy_hooks", "AntHooks"),
+         "cube": ("fmctd_dist.families.cube.policy_hooks", "CubeHooks")}  # imported on first use
 
 
 def hooks_for_env(env_name: str) -> Any:

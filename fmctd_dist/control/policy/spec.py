@@ -19,7 +19,7 @@ InputFn = Callable[[np.ndarray, np.ndarray, float], np.ndarray]
 @dataclass(frozen=True)
 class PolicySpec:
     kind: str  # manifest "kind" of its checkpoints, e.g. ant-goal-bc
-    family: str  # env family it drives (fmctd_dist.families): antmaze | cube
+    family: str  # env family it drives (fmctd_dist.registry): antmaze | cube
     name: str  # what it is, in words
     obs_dim: int  # numbers act() takes as obs
     goal_dim: int  # numbers of a subgoal

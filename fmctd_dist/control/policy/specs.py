@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-from fmctd_dist.control.policy.ant import ANT_SPEC
-from fmctd_dist.control.policy.cube import CUBE_SPEC
+from fmctd_dist.families.maze.ant_policy import ANT_SPEC
+from fmctd_dist.families.cube.policy import CUBE_SPEC
 from fmctd_dist.control.policy.spec import PolicySpec
 from fmctd_dist.errors import ConfigError
-from fmctd_dist.families import family
+from fmctd_dist.registry import family
 
 SPECS: dict[str, PolicySpec] = {s.family: s for s in (ANT_SPEC, CUBE_SPEC)}  # env family -> spec
 BY_KIND: dict[str, PolicySpec] = {s.kind: s for s in SPECS.values()}

@@ -1,0 +1,14 @@
+"""The maze family: PointMaze and AntMaze over OGBench (env_only: no network), one package for both robots.
+
+Env: ``geometry`` (maze, BFS, the OGBench env) -> ``tasks`` (start/goal protocol) -> ``pointmaze``,
+``antmaze`` -> ``make``. Data: ``oracle``, ``navigate`` -> ``point_data``, ``ant_data`` (the ant
+``expert``, a SAC walker) -> ``data``. Control: ``pd`` (point), ``subgoal`` + ``ant_controller`` + the
+learned ``ant_policy`` (ant), ``robots`` (which one a maze uses). Planning and episodes: ``hooks``,
+``episode``; measures: ``plan_quality``, ``diagnose``.
+"""
+
+from fmctd_dist.families.maze.make import make_env
+from fmctd_dist.families.maze.geometry import MazeGeometry, maze_geometry
+from fmctd_dist.families.maze.pointmaze import PointMaze
+
+__all__ = ["MazeGeometry", "maze_geometry", "PointMaze", "make_env"]

@@ -1,0 +1,243 @@
+"""Navigate datasets: generate, write .npz + manifest, load and verify.
+
+Layout: ``<data.root>/<env>-navigate-seed<seed>-<episodes>x<steps>/{train,val}.npz, manifest.json``.
+Same config -> same bytes (per-episode seeds, deterministic npz). Loading verifies every
+manifest field and sha256; a corrupt or mismatched file raises DatasetError and is never
+silently regenerated over.
+
+PointMaze data comes from the noisy BFS oracle (:mod:`fmctd_dist.families.maze.point_data`);
+AntMaze data from the ant expert steered by the same oracle (:mod:`fmctd_dist.families.maze.ant_data`).
+Both share the goal logic and per-episode seeding (:mod:`fmctd_dist.families.maze.navigate`,
+below both) and the layout and manifest (here, above both); loading gives the planner x, y
+observations [E, S, 2] for either.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shlex
+import shutil
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+
+from fmctd_dist.config import Config, is_ant, resolve_path
+from fmctd_dist.families.maze.ant_data import ANT_GENERATOR_VERSION, AntSource, check_expert_matches
+from fmctd_dist.data.manifest_io import read_manifest_json, sha256_file
+from fmctd_dist.data.npz import load_npz, save_npz
+from fmctd_dist.families.maze.point_data import POINT_GENERATOR_VERSION, PointSource
+from fmctd_dist.data.splits import SPLITS, val_episodes
+from fmctd_dist.data.tokens import Normaliser
+from fmctd_dist.errors import DatasetError
+from fmctd_dist.registry import MAZE_FAMILIES, require_family
+
+__all__ = ["SPLITS", "sha256_file", "val_episodes", "dataset_dir", "make_dataset", "load_manifest", "load_dataset",
+           "NavigateDataset", "regenerate_fix"]  # SPLITS, sha256_file: re-exported for families/visual/frame_sets.py
+MANIFEST_FIELDS = ("generator_version", "env", "seed", "noise", "episode_steps", "episodes",
+                   "sha256", "obs_mean", "obs_std")
+
+
+def dataset_dir(cfg: Config) -> Path:
+    d = cfg.data
+    return resolve_path(d.root) / f"{cfg.env.name}-navigate-seed{d.seed}-{d.episodes}x{d.episode_steps}"
+
+
+class DataSource(Protocol):
+    """What :func:`make_dataset` needs from a generator; layout, seeding and the common manifest are shared."""
+
+    version: int  # generator_version written to (and required in) the manifest
+
+    def generate(self, split: str, episodes: int, progress: bool) -> dict[str, np.ndarray]:
+        """Arrays [E, S, ...] of one split, ``observations`` first dims (E, S), x, y in observations[..., :2]."""
+        ...
+
+    def manifest_fields(self) -> dict[str, Any]:
+        """Source-specific manifest fields, called after every split is generated."""
+        ...
+
+
+def data_source(cfg: Config) -> DataSource:
+    """The generator for ``cfg.env``: the point oracle, or the ant expert (which loads and checks its weights)."""
+    if is_ant(cfg.env.name):
+        return AntSource(cfg)
+    return PointSource(cfg)
+
+
+def generator_version(env: str) -> int:
+    return ANT_GENERATOR_VERSION if is_ant(env) else POINT_GENERATOR_VERSION
+
+
+def make_dataset(cfg: Config, progress: bool = True) -> tuple[Path, dict[str, Any]]:
+    """Generate (or verify an existing) dataset; return its dir and manifest."""
+    require_family(cfg.env.name, MAZE_FAMILIES, "the navigate-data code (families/maze/data.py, used by jobs/train.py)")
+    out = dataset_dir(cfg)
+    if (out / "manifest.json").exists():
+        return out, load_manifest(out, cfg, verify=True)
+    if out.exists() and any(out.iterdir()):
+        raise DatasetError(f"{out} exists but has no manifest.json (an interrupted run?); {regenerate_fix(out, cfg)}")
+    source = data_source(cfg)  # the ant expert is loaded and checked before anything is written
+    tmp = out.with_name(out.name + ".tmp")
+    shutil.rmtree(tmp, ignore_errors=True)
+    tmp.mkdir(parents=True)
+    t0 = time.time()
+    splits = {"train": cfg.data.episodes, "val": val_episodes(cfg)}
+    sha, counts = {}, {}
+    normaliser = None
+    for split, n in splits.items():
+        arrays = source.generate(split, n, progress)
+        if split == "train":
+            flat = arrays["observations"][..., :2].reshape(-1, 2).astype(np.float64)  # the planner's x, y
+            normaliser = (flat.mean(0).tolist(), flat.std(0).tolist())
+        save_npz(tmp / f"{split}.npz", arrays)
+        sha[split] = sha256_file(tmp / f"{split}.npz")
+        counts[split] = n
+    manifest = {
+        "generator_version": source.version,
+        "env": cfg.env.name,
+        "seed": cfg.data.seed,
+        "noise": cfg.data.noise,
+        "episode_steps": cfg.data.episode_steps,
+        "episodes": counts,
+        "sha256": sha,
+        "obs_mean": normaliser[0],
+        "obs_std": normaliser[1],
+        **source.manifest_fields(),
+    }
+    (tmp / "manifest.json").write_text(json.dumps(manifest, indent=2, sort_keys=True) + "\n")
+    os.replace(tmp, out)
+    manifest["_generation_s"] = time.time() - t0
+    return out, manifest
+
+
+def regenerate_fix(path: Path, cfg: Config | None) -> str:
+    """The command that replaces a broken dataset dir with the one cfg names (deterministic: same bytes)."""
+    if cfg is None:
+        return f"delete {path} and regenerate it with jobs/make_dataset.py"
+    from fmctd_dist.hints import dataset_command, shown
+
+    fix = f"regenerate it with `rm -r {shlex.quote(shown(path))} && {dataset_command(cfg)}`"
+    if Path(path).resolve() != dataset_dir(cfg).resolve():
+        fix += f" (that writes {dataset_dir(cfg)}; point the loader there)"
+    return fix
+
+
+def _int(v: Any) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+def _manifest_type_error(m: dict[str, Any]) -> str:
+    """'' if the fields loaders index into have their JSON types, else what is wrong with the first bad one."""
+    splits = ("train", "val")
+    checks = [
+        ("episode_steps", _int(m["episode_steps"]) and m["episode_steps"] > 1, "an integer > 1"),
+        ("episodes", isinstance(m["episodes"], dict) and all(_int(m["episodes"].get(k)) and m["episodes"][k] > 0
+                                                              for k in splits),
+         "an object {train: int, val: int} of positive counts"),
+        ("sha256", isinstance(m["sha256"], dict) and all(isinstance(m["sha256"].get(k), str) for k in splits),
+         "an object {train: hex, val: hex}"),
+        ("obs_mean", isinstance(m["obs_mean"], list) and len(m["obs_mean"]) > 0
+         and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in m["obs_mean"]), "a list of numbers"),
+        ("obs_std", isinstance(m["obs_std"], list) and len(m["obs_std"]) > 0
+         and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in m["obs_std"]), "a list of numbers"),
+    ]
+    if "obs_dim" in m:
+        checks.append(("obs_dim", _int(m["obs_dim"]) and m["obs_dim"] >= 2, "an integer >= 2"))
+    for key, ok, want in checks:
+        if not ok:
+            return f"{key} is {json.dumps(m[key])[:60]} but must be {want}"
+    return ""
+
+
+def _create_fix(path: Path, cfg: Config | None) -> str:
+    """The command that makes the dataset a loader found missing at ``path``."""
+    if cfg is None:
+        return "create it with `python jobs/make_dataset.py env=<env> data.root=<root>`"
+    from fmctd_dist.hints import dataset_command
+
+    fix = f"create it with `{dataset_command(cfg)}`"
+    if path.resolve() != dataset_dir(cfg).resolve():
+        fix += f" (that writes {dataset_dir(cfg)}; point the loader there)"
+    return fix
+
+
+def load_manifest(path: Path, cfg: Config | None = None, verify: bool = True) -> dict[str, Any]:
+    """Read and check a manifest (fields, config agreement, file sha256)."""
+    mf = path / "manifest.json"
+    manifest = read_manifest_json(path, _create_fix(path, cfg), regenerate_fix(path, cfg))
+    if cfg is not None and isinstance(manifest, dict) and manifest.get("env") != cfg.env.name:  # before any field
+        raise DatasetError(f"{path} holds data of env={manifest.get('env')!r}, but the config asks for "
+                           f"env.name={cfg.env.name}; point the loader at a {cfg.env.name} dataset")
+    for key in MANIFEST_FIELDS:
+        if key not in manifest:
+            raise DatasetError(f"{mf} lacks the field {key!r}; {regenerate_fix(path, cfg)}")
+    bad = _manifest_type_error(manifest)
+    if bad:
+        raise DatasetError(f"{mf} is malformed: {bad}; {regenerate_fix(path, cfg)}")
+    version = generator_version(str(manifest["env"]))
+    if manifest["generator_version"] != version:
+        raise DatasetError(
+            f"{mf}: generator_version={manifest['generator_version']} but this code writes {version}; "
+            f"{regenerate_fix(path, cfg)}"
+        )
+    if cfg is not None:
+        expect = {"env": cfg.env.name, "seed": cfg.data.seed, "noise": cfg.data.noise,
+                  "episode_steps": cfg.data.episode_steps}
+        for key, want in expect.items():
+            if manifest[key] != want:
+                raise DatasetError(f"{mf}: {key}={manifest[key]!r} but the config asks for {want!r}; "
+                                   f"{regenerate_fix(path, cfg)}, or fix data.{key if key != 'env' else 'env.name'}")
+        if is_ant(cfg.env.name):
+            check_expert_matches(manifest, cfg, path)
+    if verify:
+        for split, digest in manifest["sha256"].items():
+            f = path / f"{split}.npz"
+            if not f.is_file():
+                raise DatasetError(f"{f} is missing; {regenerate_fix(path, cfg)}")
+            if sha256_file(f) != digest:
+                raise DatasetError(f"{f} is corrupt (sha256 differs from manifest.json); {regenerate_fix(path, cfg)}")
+    return manifest
+
+
+@dataclass
+class NavigateDataset:
+    """x, y observations [E, S, 2] per split (what the planner models) plus the manifest (digest, normaliser)."""
+
+    path: Path
+    manifest: dict[str, Any]
+    train: np.ndarray  # [E, S, 2] float32
+    val: np.ndarray  # [E_val, S, 2] float32
+
+    @property
+    def digest(self) -> str:
+        return self.manifest["sha256"]["train"]
+
+    @property
+    def normaliser(self) -> Normaliser:
+        return Normaliser.from_lists(self.manifest["obs_mean"], self.manifest["obs_std"])
+
+    def position_readout(self, cfg: Config) -> tuple[Any, dict[str, Any]]:
+        """A frame is its normalised (x, y): the readout is the frame itself (train.boundary_space=position
+        then equals token, and train.position_weight weighs the token loss's end frames again)."""
+        return _frame_xy, {"readout": "the frames' normalised x, y"}
+
+
+def _frame_xy(frames):
+    """Normalised frames [..., 2] -> the same positions (torch or numpy)."""
+    return frames[..., :2]
+
+
+def load_dataset(cfg: Config, path: Path | None = None) -> NavigateDataset:
+    require_family(cfg.env.name, MAZE_FAMILIES, "the navigate-data code (families/maze/data.py, used by jobs/train.py)")
+    path = path or dataset_dir(cfg)
+    manifest = load_manifest(path, cfg, verify=True)
+    splits = {}
+    for split in ("train", "val"):
+        want = (manifest["episodes"][split], manifest["episode_steps"], manifest.get("obs_dim", 2))
+        obs = load_npz(path / f"{split}.npz", {"observations": (np.float32, want)},
+                       f"it does not match {path / 'manifest.json'}; {regenerate_fix(path, cfg)}")["observations"]
+        splits[split] = np.ascontiguousarray(obs[..., :2], dtype=np.float32)  # ant: x, y of the 29-D state
+    return NavigateDataset(path, manifest, splits["train"], splits["val"])

@@ -1,0 +1,159 @@
+"""Training loop of the visual maze's VAE: time-budgeted, resumable, deterministic from a seed.
+
+Trains on the seeded frame subset of ``jobs/render_frames.py`` (``visual.frames`` train frames)
+and measures on its validation frames (other episodes): per-pixel MSE / PSNR of decode(mu), and
+how much of the position a *linear* read-out of mu keeps (least squares on the train frames,
+RMSE on the validation frames; the MLP estimator does better). Every ``ckpt_every`` steps it
+writes model.pt + manifest.json and train_state.pt (network, optimiser, RNGs, history);
+rerunning continues from there. ``vae.time_budget_s`` bounds the training wall time over all
+runs together, so a CPU budget is a config value, not a killed process.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from fmctd_dist.config import Config, git_sha
+from fmctd_dist.device import set_threads
+from fmctd_dist.diffusion.checkpoint import load_train_state, save_train_state
+from fmctd_dist.errors import CheckpointError
+from fmctd_dist.families.visual.checkpoint import MANIFEST_FILE, read_part_manifest, save_part
+from fmctd_dist.families.visual.config import PartsConfig, part_dir
+from fmctd_dist.families.visual.frames import FrameSet, load_frame_set
+from fmctd_dist.families.visual.vae import ConvVAE, encode_frames, psnr, recon_mse, vae_loss
+
+BATCH_STREAM, NOISE_SEED_OFFSET = 31, 1_000_003
+RESUME_FIELDS = ("latent_dim", "channels", "kl_weight", "batch_size", "seed")
+
+
+def build_vae(latent_dim: int, channels: list[int], seed: int) -> ConvVAE:
+    """Seeded init without touching the caller's global torch RNG."""
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(seed)
+        return ConvVAE(latent_dim, channels)
+
+
+def linear_probe(z_train: np.ndarray, xy_train: np.ndarray, z_val: np.ndarray, xy_val: np.ndarray) -> float:
+    """RMSE (world units, over x and y) of a least-squares affine map mu -> (x, y), fit on train, read on val."""
+    a = np.c_[z_train, np.ones(len(z_train))].astype(np.float64)
+    w, *_ = np.linalg.lstsq(a, xy_train.astype(np.float64), rcond=None)
+    pred = np.c_[z_val, np.ones(len(z_val))] @ w
+    return float(np.sqrt(np.mean(np.sum((pred - xy_val) ** 2, axis=-1))))
+
+
+def _check_resume(state: dict[str, Any], pcfg: PartsConfig, env: str, frames_sha: str, out: Path) -> None:
+    v = pcfg.vae
+    for key in RESUME_FIELDS:
+        have, want = state["config"][key], getattr(v, key)
+        if have != want:
+            raise CheckpointError(f"{out} holds a VAE run with vae.{key}={have!r} but the config has "
+                                  f"vae.{key}={want!r}; set vae.{key}={have!r} to continue it, or use a fresh vae.out")
+    if state["env"] != env:
+        raise CheckpointError(f"{out} holds a VAE run of env={state['env']} but env={env}; use env={state['env']} "
+                              "to continue it, or a fresh vae.out")
+    if state["frames_sha256"] != frames_sha:
+        raise CheckpointError(f"{out} was trained on other frames (sha256 {state['frames_sha256'][:16]}..., now "
+                              f"{frames_sha[:16]}...); set visual.frames / visual.frames_seed as they were, or use "
+                              "a fresh vae.out")
+
+
+def train_vae(cfg: Config, pcfg: PartsConfig, progress: bool = True, frames: FrameSet | None = None
+              ) -> dict[str, Any]:
+    """Train (or resume) the VAE into vae.out; returns the manifest's summary."""
+    v = pcfg.vae
+    set_threads(v.threads)
+    out = part_dir(cfg, v.out, "vae")
+    fs = frames or load_frame_set(cfg)
+    state = load_train_state(out)
+    if state is None and (out / MANIFEST_FILE).exists():
+        m = read_part_manifest(out, "vae", cfg.env.name)
+        return {"out_dir": str(out), "step": m["steps"], "wall_time_s": m["wall_time_s"], **m["metrics"]}
+    if state is not None:
+        _check_resume(state, pcfg, cfg.env.name, fs.sha256, out)
+
+    net = build_vae(v.latent_dim, v.channels, v.seed)
+    opt = torch.optim.Adam(net.parameters(), lr=v.lr)
+    rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence([v.seed, BATCH_STREAM])))
+    gen = torch.Generator().manual_seed(v.seed + NOISE_SEED_OFFSET)
+    step, wall = 0, 0.0
+    hist: dict[str, list[list[float]]] = {"train": [], "val": []}  # [step, per-pixel mse] (train: + kl)
+    if state is not None:
+        net.load_state_dict(state["net"])
+        opt.load_state_dict(state["opt"])
+        for group in opt.param_groups:
+            group["lr"] = v.lr
+        rng.bit_generator.state = state["rng"]
+        gen.set_state(state["gen"])
+        step, wall, hist = int(state["step"]), float(state["wall_time_s"]), state["history"]
+    probe: dict[str, float] = {}
+
+    def metrics() -> dict[str, Any]:
+        val = hist["val"][-1][1] if hist["val"] else None
+        return {"train_mse": hist["train"][-1][1] if hist["train"] else None,
+                "train_kl": hist["train"][-1][2] if hist["train"] else None,
+                "val_mse": val, "val_psnr_db": psnr(val) if val is not None else None, **probe}
+
+    def save() -> None:
+        save_part(out, "vae", net, {
+            "env": cfg.env.name, "latent_dim": v.latent_dim, "channels": list(v.channels), "config": {"vae": {
+                **pcfg.to_dict()["vae"]}}, "frames": fs.record(), "steps": step, "wall_time_s": round(wall, 2),
+            "metrics": metrics(), "val_history": hist["val"], "git_sha": git_sha(),
+            "input_layout": "encode(uint8 [B, 64, 64, 3] chase-camera frames) -> mu, logvar [B, latent_dim]; "
+                            "decode(z) -> [B, 3, 64, 64] in (0, 1)"})
+        save_train_state(out, {"net": net.state_dict(), "opt": opt.state_dict(), "rng": rng.bit_generator.state,
+                               "gen": gen.get_state(), "step": step, "wall_time_s": wall, "history": hist,
+                               "config": pcfg.to_dict()["vae"], "env": cfg.env.name, "frames_sha256": fs.sha256})
+
+    def over_budget() -> bool:
+        return v.time_budget_s > 0 and wall + (time.perf_counter() - t_seg) >= v.time_budget_s
+
+    bar = tqdm(total=v.max_steps, initial=step, disable=not progress, desc=f"vae {cfg.env.name}", dynamic_ncols=True)
+    t_seg = t_log = time.perf_counter()
+    n_log, mse_sum, kl_sum = 0, 0.0, 0.0
+    images = torch.from_numpy(fs.train_images)
+    net.train()
+    stop = step >= v.max_steps or over_budget()
+    if stop and (out / MANIFEST_FILE).exists():  # finished earlier (budget or steps): nothing to do
+        bar.close()
+        m = read_part_manifest(out, "vae", cfg.env.name)
+        return {"out_dir": str(out), "step": m["steps"], "wall_time_s": m["wall_time_s"], **m["metrics"]}
+    while not stop:
+        idx = rng.integers(0, len(images), size=v.batch_size)
+        loss, mse, kl = vae_loss(net, images[idx], v.kl_weight, gen)
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        opt.step()
+        step += 1
+        n_log, mse_sum, kl_sum = n_log + 1, mse_sum + float(mse.detach()), kl_sum + float(kl.detach())
+        stop = step >= v.max_steps or over_budget()
+        if step % v.log_every == 0 or stop:
+            now = time.perf_counter()
+            hist["train"].append([step, mse_sum / n_log, kl_sum / n_log])
+            post = {"mse": f"{mse_sum / n_log:.5f}", "kl": f"{kl_sum / n_log:.0f}",
+                    "s/step": f"{(now - t_log) / n_log:.2f}"}
+            if hist["val"]:
+                post["val_psnr"] = f"{psnr(hist['val'][-1][1]):.1f}"
+            bar.set_postfix(post, refresh=False)
+            bar.update(n_log)
+            n_log, mse_sum, kl_sum, t_log = 0, 0.0, 0.0, now
+        if step % v.val_every == 0 or stop:
+            hist["val"].append([step, recon_mse(net, fs.val_images)])
+            net.train()
+        if stop:
+            z_tr, _ = encode_frames(net, fs.train_images)
+            z_va, _ = encode_frames(net, fs.val_images)
+            probe["val_linear_xy_rmse"] = linear_probe(z_tr, fs.train_xy, z_va, fs.val_xy)
+            net.train()
+        if step % v.ckpt_every == 0 or stop:
+            now = time.perf_counter()
+            wall += now - t_seg
+            t_seg = now
+            save()
+    bar.close()
+    return {"out_dir": str(out), "step": step, "wall_time_s": wall, **metrics()}
