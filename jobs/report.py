@@ -1,7 +1,8 @@
 """Regenerate the evaluation tables and figures of docs/results.md from the Parquet rows.
 
-    python jobs/report.py                          # results/ -> docs/results.md + docs/figures/
+    python jobs/report.py                          # results/ -> docs/results.md + docs/figures/ + checkpoints/README.md
     python jobs/report.py results=/tmp/res doc=/tmp/results.md
+    python jobs/report.py --checkpoints            # only checkpoints/README.md, from the checkpoints' manifests
 
 Reads the run ``main`` (the maze tables: every method x PointMaze / AntMaze maze) and the ablation runs
 ``ablate-w/*``, ``ablate-ras/*``, ``ablate-leaf/*``, ``ablate-k/*``, ``ablate-h/*`` (made by
@@ -10,7 +11,7 @@ rewrites only the blocks between ``<!-- report:NAME -->`` markers. Runs cited by
 sections (cubes, visual maze, recipe and option benches: ``ARCHIVED``) are not tabulated here but
 their rows are archived with the rest; the exceptions are the robot table (block ``robot``):
 every archived cube episode whose config hash is today's default for its method and env, and the
-visual table (block ``visual``): the lines ``fmctd_dist/evaluation/visual_table.py`` names, one run each. The block
+visual table (block ``visual``): the lines ``fmctd_dist/families/visual/table.py`` names, one run each. The block
 ``glance`` at the doc's top, where the doc has one, puts one success cell per method x env of those
 tables beside the paper's. An episode
 re-run with another identity (retrained weights at the same path) keeps its earlier row in the archive,
@@ -19,6 +20,10 @@ under run ``superseded/<run>@<config>-<ckpt>``, out of the tables. Also writes
 tables can be traced to its episodes from git alone. That file is also read back: the tables are
 its rows with each episode that ``results/`` also holds replaced by the fresh row, so a fresh
 machine (no ``results/``) adds rows without losing earlier sessions' ones.
+
+``checkpoints/README.md`` (every shipped checkpoint dir: what it is, digest, lineage, hours, quality, who reads
+it; ``fmctd_dist/checkpoint_index.py``) is rewritten too when the doc is the project's own docs/results.md, and
+alone with ``--checkpoints``; tests/test_checkpoint_index.py holds the committed file to the manifests.
 """
 
 from __future__ import annotations
@@ -29,16 +34,17 @@ from pathlib import Path
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from fmctd_dist.checkpoint_index import write_index
 from fmctd_dist.cli import run
 from fmctd_dist.config import REPO_ROOT, Config, load_config, resolve_path
-from fmctd_dist.envs import maze_geometry
+from fmctd_dist.families.maze.geometry import maze_geometry
 from fmctd_dist.evaluation.identity import config_hash
 from fmctd_dist.evaluation.plots import plot_ablation, plot_episode, plot_success_vs_time
 from fmctd_dist.evaluation.report import ABLATIONS, ANT_ENV_ORDER, CUBE_ENV_ORDER, CUBE_METHOD_ORDER, ENV_ORDER, \
     METHOD_ORDER, ablation_summary, ablation_table, current_rows, fill_markers, glance_table, load_rows, \
     maze_table, merge_rows, row_key, superseded
 from fmctd_dist.evaluation.results import summarise
-from fmctd_dist.evaluation.visual_table import visual_table
+from fmctd_dist.families.visual.table import visual_table
 from fmctd_dist.errors import ConfigError
 
 
@@ -72,6 +78,11 @@ def shipped_digests(envs: list[str], methods: list[str]) -> dict[tuple[str, str]
 
 
 def main(argv: list[str]) -> int:
+    if "--checkpoints" in argv:
+        if len(argv) > 1:
+            raise ConfigError("report: --checkpoints takes no other argument (it rewrites checkpoints/README.md only)")
+        print(f"wrote {write_index().relative_to(REPO_ROOT)}")
+        return 0
     opts = parse(argv)
     root, doc, figures = resolve_path(opts["results"]), resolve_path(opts["doc"]), resolve_path(opts["figures"])
     lean_path = doc.parent / "eval_rows.parquet"
@@ -142,6 +153,8 @@ def main(argv: list[str]) -> int:
         pq.write_table(pa.table({k: [r.get(k) for r in all_rows] for k in keys}), lean_path)  # union of columns
     for name, body in sections.items():
         print(f"## {name}\n{body}\n")
+    if doc == resolve_path("docs/results.md"):  # the project's docs, not a copy elsewhere (tests write to tmp)
+        print(f"wrote {write_index().relative_to(REPO_ROOT)}")
     print(f"{len(all_rows)} rows ({len(fresh)} fresh from {root}, the rest from {lean_path.name}); "
           f"updated {len(sections)} blocks in "
           f"{doc.relative_to(REPO_ROOT) if doc.is_relative_to(REPO_ROOT) else doc}; figures in {figures}")

@@ -44,10 +44,19 @@ def test_gpu_train_dry_run_packs_one_tar_per_model(tmp_path):
     assert "sha256" in (out / "train_logs.txt").read_text()
 
 
-def test_campaign_set_starts_from_the_shipped_campaign_weights():
+def test_campaign_set_continues_the_shipped_pointmaze_models():
+    """The campaign set continues each shipped PointMaze model (the default checkpoint of its env and jump; the
+    campaign-* snapshots it once named held the same bytes) with the recipe levers that model's manifest records."""
     for name, words in SETS["campaign"]:
-        assert f"train.init_from=checkpoints/campaign-{name}" in words
-        assert (REPO / "checkpoints" / f"campaign-{name}" / "manifest.json").exists()
+        assert f"train.init_from=checkpoints/{name}" in words
+        manifest = json.loads((REPO / "checkpoints" / name / "manifest.json").read_text())
+        maze, jump = name.rsplit("-h", 1)
+        assert manifest["config"]["env"]["name"] == maze and manifest["config"]["jump"] == int(jump)
+        train = manifest["config"]["train"]
+        levers = {k: float(v) for k, v in (w.split("=", 1) for w in words) if k in ("train.boundary_weight",
+                                                                                  "train.clean_context")}
+        assert levers.get("train.boundary_weight", 0.0) == train["boundary_weight"]
+        assert levers.get("train.clean_context", 0.0) == train["clean_context"]
 
 
 def test_merge_keeps_the_last_value_of_each_key():
@@ -57,8 +66,8 @@ def test_merge_keeps_the_last_value_of_each_key():
 def test_ant_set_dry_run_makes_its_data_with_workers_and_fine_tunes(tmp_path):
     """The ant set's chain on CPU: the tiny ant dataset made by 2 worker processes, one model packed."""
     out = tmp_path / "out"
-    cmd = [sys.executable, "jobs/gpu/gpu_train.py", str(out), "--dry-run", "--set", "ant", "--only", "antmaze-medium-h5",
-           "--data-workers", "2", "--runs", str(tmp_path / "runs")]
+    cmd = [sys.executable, "jobs/gpu/gpu_train.py", str(out), "--dry-run", "--set", "ant",
+           "--only", "antmaze-medium-h5", "--data-workers", "2", "--runs", str(tmp_path / "runs")]
     done = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=600,
                           env={**os.environ, "OMP_NUM_THREADS": "1"})
     assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
