@@ -22,8 +22,8 @@ from omegaconf import MISSING, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
 from fmctd_dist.errors import ConfigError, did_you_mean, unknown_name
-from fmctd_dist.registry import ANT_ENVS, CUBE_ENVS, ENV_NAMES, MAZES, POINT_ENVS  # noqa: F401 - re-exported
-from fmctd_dist.registry import ENV_FIELD_READERS, MAZE_FAMILIES, PENDING_FAMILIES, family, require_family, state_dim
+from fmctd_dist.families.maze.record import ANT_ENVS, MAZE_KINDS
+from fmctd_dist.registry import env_config_dir, env_field_readers, env_names, family, require_family, state_dim
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 CONFIG_DIR = REPO_ROOT / "configs"
@@ -64,7 +64,7 @@ class Range:
     gt: float | None = None
     le: float | None = None
     lt: float | None = None
-    choices: tuple[str, ...] | None = None
+    choices: tuple[str, ...] | Callable[[], tuple[str, ...]] | None = None  # a callable: read when checked
     each: bool = False
     nonempty: bool = False
     multiple_of: int | None = None
@@ -98,8 +98,9 @@ class Range:
         """One ConfigError naming ``key``, the bad value, the valid range and the fix."""
         fix = f"; {self.why}" if self.why else ""
         if self.choices is not None:
-            if value not in self.choices:
-                raise unknown_name(key, value, self.choices)
+            choices = self.choices() if callable(self.choices) else self.choices
+            if value not in choices:
+                raise unknown_name(key, value, choices)
             return
         items = list(value) if self.each else [value]
         if self.nonempty and not items:
@@ -138,7 +139,7 @@ THREADS = "0 = torch's default; 1 when other jobs share the cores"
 @dataclass
 class EnvConfig:
     # pointmaze-{medium,large,giant} | antmaze-{...} | cube-{single,double,triple}
-    name: str = spec("pointmaze-medium", choices=ENV_NAMES)
+    name: str = spec("pointmaze-medium", choices=env_names)  # every registered family's envs
     # fixed: start/goal at cell centres (paper); ogbench: stock +-1 noise
     protocol: str = spec("fixed", choices=PROTOCOLS)
     max_steps: int = spec(500, gt=0, why="env steps of one episode (500 medium/large, 1000 giant)")
@@ -481,7 +482,8 @@ def group_names(group: str) -> list[str]:
 
 
 def _group_file(group: str, name: str) -> Any:
-    path = CONFIG_DIR / group / f"{name}.yaml"
+    own = env_config_dir(name) if group == "env" else None  # a family that keeps its own env configs
+    path = (own or CONFIG_DIR / group) / f"{name}.yaml"
     if not path.is_file():
         raise unknown_name(group, name, group_names(group))
     return OmegaConf.load(path)
@@ -550,14 +552,12 @@ def parse_overrides(args: list[str]) -> tuple[dict[str, str], list[tuple[str, st
     return groups, dotted
 
 
-def load_config(args: list[str] | None = None, *, env: str = "pointmaze-medium", method: str = "fast-mctd",
-                serves: tuple[str, ...] = ()) -> Config:
+def load_config(args: list[str] | None = None, *, env: str = "pointmaze-medium", method: str = "fast-mctd") -> Config:
     """Build and validate a Config from group defaults and ``key=value`` words.
 
     Order: dataclass defaults, configs/env/<env>.yaml, configs/method/<method>.yaml, then
     dotted overrides in the order given. ``env``/``method`` give the default group names.
-    An env of a family whose planner is not built yet (``PENDING_FAMILIES``) is one ConfigError
-    unless the job ``serves`` that family (jobs/render_frames.py serves the visual maze).
+    A family that keeps its own configs (``registry.Family.configs``) has its env file read from there.
     """
     groups, dotted = parse_overrides(list(args or []))
     cfg = OmegaConf.structured(Config)
@@ -567,8 +567,6 @@ def load_config(args: list[str] | None = None, *, env: str = "pointmaze-medium",
         cfg = apply_override(cfg, key, value)
     obj: Config = OmegaConf.to_object(cfg)  # type: ignore[assignment]
     validate(obj)
-    if family(obj.env.name) in PENDING_FAMILIES and family(obj.env.name) not in serves:
-        require_family(obj.env.name, serves, "this job")
     return obj
 
 
@@ -597,9 +595,9 @@ def check_ranges(cfg: Config) -> None:
 
 
 def check_env_fields(env: EnvConfig) -> None:
-    """One ConfigError for an env field set on a family that never reads it (``families.ENV_FIELD_READERS``)."""
+    """One ConfigError for an env field set on a family that never reads it (``registry.env_field_readers``)."""
     fam, default = family(env.name), EnvConfig()
-    for key, readers in ENV_FIELD_READERS.items():
+    for key, readers in env_field_readers().items():
         value = getattr(env, key)
         if fam not in readers and value != getattr(default, key):
             raise ConfigError(f"env.{key}={value!r} is read by {' / '.join(readers)} envs only; env.name={env.name} "
@@ -615,7 +613,7 @@ def validate(cfg: Config) -> None:
         raise ConfigError(f"visual.plan_xy=true adds the position estimator's (x, y) to a visual maze's latent "
                           f"frames; env.name={cfg.env.name} ({family(cfg.env.name)}) has no latents. "
                           "Drop visual.plan_xy")
-    if cfg.method.wall_test and family(cfg.env.name) not in MAZE_FAMILIES:
+    if cfg.method.wall_test and family(cfg.env.name) not in MAZE_KINDS:
         raise ConfigError(f"method.wall_test=true needs a point or ant maze (the walls come from its cells); "
                           f"env.name={cfg.env.name} ({family(cfg.env.name)}) has none. Drop method.wall_test")
     if cfg.model.kind == "diffuser" and cfg.method.planner != "diffuser":

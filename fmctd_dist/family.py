@@ -4,7 +4,7 @@ A family differs in the tree's action set and plan value (mazes: guidance scales
 value; cubes: (unsolved cube, scale) pairs + the cube rules) and in how an episode is driven
 (PD or ant policy on waypoints; the arm's pre-defined plans + the cube policy). Planners,
 ``evaluation/grid.py`` and ``evaluation/ray_runner.py`` ask :func:`hooks_for` and never branch
-on the family. The module of each family is named in :data:`fmctd_dist.registry.HOOKS` and
+on the family. The module of each family is named in its registry record (:mod:`fmctd_dist.registry`) and
 imported by name, so nothing below the hooks imports them.
 """
 
@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
-from fmctd_dist.registry import HOOKS, family, require_family
+from fmctd_dist.registry import family_record
 
 if TYPE_CHECKING:
     from fmctd_dist.config import Config
@@ -82,6 +82,5 @@ def warp_threshold(cfg: "Config") -> float:
 
 
 def hooks_for(env_name: str) -> FamilyHooks:
-    """The hook module of ``env_name``'s family (an unknown name or a family without hooks: one ConfigError)."""
-    require_family(env_name, tuple(HOOKS), "the planner and episode runner")
-    return importlib.import_module(HOOKS[family(env_name)])  # type: ignore[return-value]
+    """The hook module of ``env_name``'s family (an unknown name: one ConfigError)."""
+    return importlib.import_module(family_record(env_name).hooks)  # type: ignore[return-value]

@@ -1,83 +1,96 @@
-"""Env families: which env names exist, which family each belongs to, and what its planner models.
+"""Env families: one record per family package, the only registry (docs/design.md §13).
 
-A family (docs/design.md §13) is one package under ``fmctd_dist/families/``: ``maze`` (the point and
-ant robots), ``cube`` (the robot arm) and ``visual`` (the point maze seen through a camera), each with
-its env, data, episode, value rules, controller and configs.
-This registry sits below all of them and imports nothing of ours but the errors, so config,
-envs and data can ask it without import cycles; ``search/``, ``denoiser/`` and ``evaluation/``
-never branch on a family.
+A family is one package (``fmctd_dist/families/<name>/`` for ours; any importable package for a new
+one) whose ``record`` module holds a :class:`Family`: its env names and planner state, and the
+modules that implement its hooks (plan rules, episodes, figures), its data (make / load / describe)
+and, per robot, its learned low-level policy. :data:`FAMILIES` maps a family's name to that module;
+adding a family is adding its package, one line here, and its env configs. Record modules are light
+(names and small specs only), so config, data and the jobs read them without import cycles; the
+core (search, denoiser, diffusion, planners, evaluation) asks :mod:`fmctd_dist.family` and never
+names a family.
 
-Code written for some families only guards its entry with :func:`require_family`, so a name
-from another family stops there with one ConfigError instead of a crash deeper down.
+Code written for some families only guards its entry with :func:`require_family`, so a name from
+another family stops there with one ConfigError naming what to run instead.
 """
 
 from __future__ import annotations
 
+import importlib
 from dataclasses import dataclass
+from functools import cache
+from pathlib import Path
 
 from fmctd_dist.errors import ConfigError, unknown_name
 
-MAZES = ("medium", "large", "giant")
-POINT_ENVS = tuple(f"pointmaze-{m}" for m in MAZES)
-ANT_ENVS = tuple(f"antmaze-{m}" for m in MAZES)
-CUBE_TYPES = ("single", "double", "triple")  # OGBench CubeEnv env_type
-CUBE_ENVS = tuple(f"cube-{c}" for c in CUBE_TYPES)
-MAZE_ENVS = POINT_ENVS + ANT_ENVS
-VISUAL_ENVS = ("visual-pointmaze-medium", "visual-pointmaze-large")  # 64x64 chase-camera images (issue 21)
-ENV_NAMES = MAZE_ENVS + CUBE_ENVS + VISUAL_ENVS
-
-MAZE_FAMILIES = ("pointmaze", "antmaze")
-VISUAL_PLANNER_ISSUE = "issue 21"  # where the visual planner (VAE, inverse dynamics, latent DF) is built
-# Families whose planner is not built yet: load_config refuses them unless the job names them,
-# so train / eval stop with one ConfigError before any work. (None now: the visual maze's is built.)
-PENDING_FAMILIES: tuple[str, ...] = ()
-# Each family's hook module (fmctd_dist.family.FamilyHooks): its plan rules (the tree's actions and
-# value) and its episodes. Named, not imported, so this registry stays below everything.
-HOOKS = {"pointmaze": "fmctd_dist.families.maze.hooks", "antmaze": "fmctd_dist.families.maze.hooks",
-         "cube": "fmctd_dist.families.cube.hooks",
-         "visual-pointmaze": "fmctd_dist.families.visual.hooks"}
-
-# The env fields only some families read (the rest, name / protocol / max_steps / horizon, every family
-# reads). Set away from its default on another family, such a field would be silently unused, so
-# config.validate refuses it: one ConfigError naming the field and who reads it.
-ENV_FIELD_READERS: dict[str, tuple[str, ...]] = {
-    "policy": ("antmaze", "cube"),  # the low-level policy dir
-    "replan_every": ("cube",),  # the maze families replan on method.replan_every
-    "warp_dense": ("cube", "visual-pointmaze"),  # the point / ant mazes use method.warp_threshold
-    "warp_sparse": ("cube", "visual-pointmaze"),
-    "object_scales": ("cube",),
-    "preposition_yaw": ("cube",),
-    "start_tolerance": ("cube",),
+# family name -> the module holding its record
+FAMILIES: dict[str, str] = {
+    "maze": "fmctd_dist.families.maze.record",
+    "cube": "fmctd_dist.families.cube.record",
+    "visual": "fmctd_dist.families.visual.record",
 }
 
 
 @dataclass(frozen=True)
 class EnvSpec:
-    """One env name: its family and the planner state the diffusion model works on."""
+    """One env name: its kind (the robot or setting its rules are keyed by) and the planner state."""
 
     name: str  # e.g. pointmaze-medium, cube-double
-    family: str  # pointmaze | antmaze | cube
+    family: str  # the kind: pointmaze | antmaze | cube | visual-pointmaze (several kinds may share a package)
     state_dim: int  # planner state per frame: maze x, y (2) | cube xyz in obs units (3 per cube)
     state: str  # what the planner state is, in words (for messages and manifests)
+    policy: str = ""  # "module:Class" of its learned low-level policy's hooks ("" = none: e.g. the point's PD law)
+    env_fields: tuple[str, ...] = ()  # the env config fields only some envs read, that this one reads
 
 
-ENVS: dict[str, EnvSpec] = {
-    **{n: EnvSpec(n, "pointmaze", 2, "x, y") for n in POINT_ENVS},
-    **{n: EnvSpec(n, "antmaze", 2, "torso x, y") for n in ANT_ENVS},
-    **{f"cube-{c}": EnvSpec(f"cube-{c}", "cube", 3 * (i + 1), f"xyz of {i + 1} cube(s) in obs units")
-       for i, c in enumerate(CUBE_TYPES)},
-    **{n: EnvSpec(n, "visual-pointmaze", 8, "8-D VAE latent of a 64x64 chase-camera image") for n in VISUAL_ENVS},
-}
+@dataclass(frozen=True)
+class Family:
+    """What a family brings. Modules are named, not imported: the record stays light."""
+
+    name: str  # maze | cube | visual
+    envs: tuple[EnvSpec, ...]
+    hooks: str  # module with plan_rules, check_episodes, episodes, plot_episode [, guide_map] (fmctd_dist.family)
+    data: str  # module with make(cfg, progress) -> (dir, manifest), load(cfg) -> dataset, describe(manifest)
+    configs: str = ""  # folder holding env/<name>.yaml for its envs; "" = the repository's configs/
+    hint: str = ""  # what to run for this family, named when a job built for others refuses one of its envs
+
+
+@cache
+def records() -> dict[str, Family]:
+    """Every registered family's record (imported once; ``records.cache_clear()`` after editing FAMILIES)."""
+    out = {}
+    for name, module in FAMILIES.items():
+        rec = importlib.import_module(module).FAMILY
+        if rec.name != name:
+            raise ConfigError(f"registry: {module} holds family {rec.name!r}, registered as {name!r}")
+        out[name] = rec
+    return out
+
+
+@cache
+def env_specs() -> dict[str, EnvSpec]:
+    return {e.name: e for rec in records().values() for e in rec.envs}
+
+
+def env_names() -> tuple[str, ...]:
+    return tuple(env_specs())
 
 
 def env_spec(name: str, field: str = "env.name") -> EnvSpec:
     """The spec of ``name``; an unknown name is one ConfigError with the closest valid one."""
-    if name not in ENVS:
-        raise unknown_name(field, name, ENV_NAMES)
-    return ENVS[name]
+    specs = env_specs()
+    if name not in specs:
+        raise unknown_name(field, name, tuple(specs))
+    return specs[name]
+
+
+def family_record(env_name: str) -> Family:
+    """The record of the family package that serves ``env_name``."""
+    env_spec(env_name)
+    return next(rec for rec in records().values() if any(e.name == env_name for e in rec.envs))
 
 
 def family(name: str) -> str:
+    """``name``'s kind (pointmaze, antmaze, cube, visual-pointmaze): what per-robot rules are keyed by."""
     return env_spec(name).family
 
 
@@ -85,19 +98,30 @@ def state_dim(name: str) -> int:
     return env_spec(name).state_dim
 
 
+def env_config_dir(env_name: str) -> Path | None:
+    """Where ``env_name``'s config lives when its family keeps its own (None: the repository's configs/env)."""
+    specs = env_specs()
+    if env_name not in specs:
+        return None
+    rec = family_record(env_name)
+    return Path(rec.configs) / "env" if rec.configs else None
+
+
+def env_field_readers() -> dict[str, tuple[str, ...]]:
+    """env field -> the kinds that read it, for the fields only some families read (config.validate refuses
+    such a field set away from its default on an env that never reads it)."""
+    out: dict[str, dict[str, None]] = {}
+    for spec in env_specs().values():
+        for f in spec.env_fields:
+            out.setdefault(f, {})[spec.family] = None
+    return {f: tuple(kinds) for f, kinds in out.items()}
+
+
 def require_family(name: str, families: tuple[str, ...], what: str) -> str:
-    """``name`` if its family is one of ``families``; else one ConfigError saying what is not built for it."""
+    """``name`` if its kind is one of ``families``; else one ConfigError saying what is not built for it."""
     spec = env_spec(name)
     if spec.family in families:
         return name
-    if spec.family == "visual-pointmaze":
-        raise ConfigError(f"env.name={name} is a visual maze env (64x64 images, {VISUAL_PLANNER_ISSUE}), but {what} "
-                          f"is not built for it. The visual maze's code: python jobs/train_visual.py part=... "
-                          f"env={name} (VAE, latents, estimator, inverse dynamics); python jobs/train.py env={name} "
-                          f"jump=5; python jobs/eval.py env={name}")
-    if spec.family == "cube":
-        raise ConfigError(f"env.name={name} is a cube env, but {what} is built for mazes only. The cube code: "
-                          f"python jobs/make_dataset.py env={name}; python jobs/train.py env={name} jump=5; "
-                          f"python jobs/train_policy.py env=cube-single; python jobs/eval.py env={name}")
+    hint = family_record(name).hint
     raise ConfigError(f"env.name={name} is a {spec.family} env, but {what} is built for "
-                      f"{' / '.join(families)} envs only")
+                      f"{' / '.join(families)} envs only" + (f". {hint}" if hint else ""))

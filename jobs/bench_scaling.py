@@ -29,7 +29,7 @@ from fmctd_dist.denoiser.local import LocalDenoiser
 from fmctd_dist.denoiser.protocol import DenoiseBatch, DenoiseResult
 from fmctd_dist.diffusion.checkpoint import normaliser_from_manifest, read_manifest
 from fmctd_dist.diffusion.schedule import PyramidSchedule
-from fmctd_dist.families.maze import maze_geometry
+from fmctd_dist.families.maze.geometry import maze_geometry
 from fmctd_dist.evaluation.grid import prepare
 from fmctd_dist.planners import make_planner
 

@@ -21,7 +21,7 @@ from fmctd_dist.families.visual.frame_sets import episode_subset, make_frames
 
 def main(argv: list[str]) -> int:
     t0 = time.time()
-    cfg = load_config(argv, env="visual-pointmaze-medium", method="mctd", serves=("visual-pointmaze",))
+    cfg = load_config(argv, env="visual-pointmaze-medium", method="mctd")
     path, m = make_frames(cfg)
     print(f"{path}: {m['frames']} train + {m['val_frames']} validation frames of {m['point_env']} "
           f"(seed {m['frames_seed']}), sha256={m['sha256']}")

@@ -26,7 +26,7 @@ from fmctd_dist.diffusion.train import train
 def main(argv: list[str]) -> int:
     method = "diffuser" if "model.kind=diffuser" in [a.replace(" ", "") for a in argv] else "mctd"
     # dense (jump=1) unless jump=... is given; cube models are trained before the cube planner exists
-    cfg = load_config(argv, method=method, serves=("cube",))
+    cfg = load_config(argv, method=method)
     resolve_device(cfg.device)  # a missing GPU fails here, before any work
     make_family_dataset(cfg)
     data = train_data(cfg, load_family_dataset(cfg))

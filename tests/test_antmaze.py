@@ -37,7 +37,7 @@ def ant_dataset(tmp_path_factory):
 # ---- env ----
 
 def test_make_env_gives_an_ant_with_29d_obs_and_8d_actions():
-    from fmctd_dist.families.maze import make_env
+    from fmctd_dist.families.maze.make import make_env
     from fmctd_dist.families.maze.antmaze import AntMaze
 
     env = make_env("antmaze-medium")
@@ -57,7 +57,7 @@ def test_make_env_gives_an_ant_with_29d_obs_and_8d_actions():
 
 
 def test_success_is_within_half_a_metre_after_the_step():
-    from fmctd_dist.families.maze import make_env
+    from fmctd_dist.families.maze.make import make_env
 
     env = make_env("antmaze-medium")
     env.reset(2, seed=0)
@@ -163,7 +163,7 @@ def test_wrong_observation_size_to_the_expert():
 
 
 def test_unknown_env_names_suggest_the_closest():
-    from fmctd_dist.families.maze import make_env
+    from fmctd_dist.families.maze.make import make_env
 
     with pytest.raises(ConfigError, match="did you mean 'antmaze-medium'"):
         load_config(["env=antmaze-medim"])

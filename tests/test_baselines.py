@@ -5,7 +5,7 @@ import numpy as np
 from fmctd_dist.config import load_config
 from fmctd_dist.denoiser.local import LocalDenoiser
 from fmctd_dist.diffusion.checkpoint import load_checkpoint, normaliser_from_manifest
-from fmctd_dist.families.maze import make_env
+from fmctd_dist.families.maze.make import make_env
 from fmctd_dist.families.maze.episode import run_episode
 from fmctd_dist.planners import PlanOutput, make_planner
 from fmctd_dist.planners.diffusion_forcing import DiffusionForcingPlanner

@@ -20,7 +20,7 @@ TINY = ["data.episodes=2", "data.episode_steps=121", "env.horizon=100", "env.max
 
 
 def tiny_cfg(root, env="cube-single", *extra):
-    return load_config([f"env={env}", *TINY, f"data.root={root}", *extra], method="mctd", serves=("cube",))
+    return load_config([f"env={env}", *TINY, f"data.root={root}", *extra], method="mctd")
 
 
 @pytest.fixture(scope="module")
@@ -204,7 +204,7 @@ def test_windows_over_cube_xyz(tiny_cube, jump, tokens):
 
 def test_unknown_cube_env_suggests():
     with pytest.raises(ConfigError, match="did you mean 'cube-single'"):
-        load_config(["env=cube-singel"], method="mctd", serves=("cube",))
+        load_config(["env=cube-singel"], method="mctd")
     from fmctd_dist.registry import env_spec
 
     with pytest.raises(ConfigError, match="did you mean 'cube-triple'"):
@@ -235,12 +235,13 @@ def test_cube_data_for_a_maze_model(tiny_cube, tmp_path):
 def test_maze_code_refuses_cube_envs(tiny_cube):
     """The maze code guards its own entries: a cube env name stops there with one error naming the cube jobs."""
     from fmctd_dist.families.maze.data import load_dataset, make_dataset
-    from fmctd_dist.families.maze import make_env, maze_geometry
+    from fmctd_dist.families.maze.make import make_env
+    from fmctd_dist.families.maze.geometry import maze_geometry
 
     cfg, _, _ = tiny_cube
     for call in (lambda: make_env("cube-single"), lambda: maze_geometry("cube-double"),
                  lambda: load_dataset(cfg), lambda: make_dataset(cfg)):
-        with pytest.raises(ConfigError, match="is a cube env.*built for mazes only.*jobs/eval.py env=cube-"):
+        with pytest.raises(ConfigError, match="is a cube env.*for pointmaze / antmaze envs only.*eval.py env=cube"):
             call()
 
 

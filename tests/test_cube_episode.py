@@ -49,7 +49,7 @@ def test_maze_hooks_give_the_search_its_old_defaults():
 
 
 def test_cube_hooks_build_object_actions_from_the_unsolved_cubes():
-    cfg = load_config(["env=cube-double", "method=fast-mctd-replan"], serves=("cube",))
+    cfg = load_config(["env=cube-double", "method=fast-mctd-replan"])
     rules = hooks_for("cube-double").plan_rules(cfg)
     start = np.array([0.0, 1.0, 0.2, 1.0, -1.0, 0.2])
     goal = np.array([0.0, 1.0, 0.2, 2.0, 1.0, 0.2])  # cube 0 is already at its goal
@@ -59,12 +59,11 @@ def test_cube_hooks_build_object_actions_from_the_unsolved_cubes():
     assert value.warp_threshold == 2.0 and value.replanning  # jump 5: the sparse threshold; a replan method
     fixed, _ = rules.fixed(start, goal)
     assert fixed.mask.tolist() == [[0, 0, 0, 1, 1, 1]] and fixed.scale.tolist() == [cfg.method.guidance_scale]
-    dense = load_config(["env=cube-double", "method=mctd", "jump=1"], serves=("cube",))
+    dense = load_config(["env=cube-double", "method=mctd", "jump=1"])
     v = hooks_for("cube-double").plan_rules(dense).value
     assert v.warp_threshold == 1.0 and not v.replanning
     with pytest.raises(ConfigError, match="object_scales"):
-        hooks_for("cube-double").plan_rules(load_config(["env=cube-double", "env.object_scales=[]"],
-                                                        serves=("cube",)))
+        hooks_for("cube-double").plan_rules(load_config(["env=cube-double", "env.object_scales=[]"]))
 
 
 def test_an_env_without_hooks_is_one_error():
@@ -130,9 +129,9 @@ def test_pre_position_turns_to_the_cube_only_when_asked(single):
         obs, _ = single.step(a)
     cube = ["env=cube-single", "method=fast-mctd-replan"]
     # the cube configs turn by default; the authors' rule (false) hashes as the rows made before the option
-    assert load_config(cube, serves=("cube",)).env.preposition_yaw is True
-    assert config_hash(load_config([*cube, "env.preposition_yaw=false"], serves=("cube",))) == "40035edf105f5ce3"
-    assert config_hash(load_config(cube, serves=("cube",))) != "40035edf105f5ce3"  # results/cube-methods-s9's rows
+    assert load_config(cube).env.preposition_yaw is True
+    assert config_hash(load_config([*cube, "env.preposition_yaw=false"])) == "40035edf105f5ce3"
+    assert config_hash(load_config(cube)) != "40035edf105f5ce3"  # results/cube-methods-s9's rows
 
 
 # ---- target choice ----
@@ -192,7 +191,7 @@ def tiny_double(tmp_path_factory):
     args = ["env=cube-double", *TINY_DATA, *TINY_MODEL, f"data.root={root}", f"checkpoint={root / 'ckpt'}",
             f"env.policy={root / 'policy'}"]
     cfg = load_config(args + ["train.max_steps=2", "train.batch_size=4", "train.val_batches=1", "train.warmup=1"],
-                      method="mctd", serves=("cube",))
+                      method="mctd")
     make_family_dataset(cfg, progress=False)
     torch.manual_seed(0)
     with torch.random.fork_rng():
@@ -209,7 +208,7 @@ def test_a_cube_plan_has_the_right_shape_and_pins_the_other_cube(tiny_double):
     from fmctd_dist.diffusion.checkpoint import normaliser_from_manifest, read_manifest
     from fmctd_dist.planners import make_planner
 
-    cfg = load_config(["method=fast-mctd-replan", *tiny_double, *SEARCH], serves=("cube",))
+    cfg = load_config(["method=fast-mctd-replan", *tiny_double, *SEARCH])
     ckpt = cfg.checkpoint_dir()
     planner = make_planner(cfg, LocalDenoiser.from_checkpoint(ckpt, cfg), normaliser_from_manifest(read_manifest(ckpt)))
     env = CubeEpisodes("cube-double")
@@ -238,7 +237,7 @@ def run_grid(args: list[str], tmp_path, runner: str) -> list[dict]:
     from fmctd_dist.evaluation.results import ResultStore
 
     cfg = load_config(args + [f"eval.out={tmp_path}", "eval.run=r", "tasks=[1]", "seeds=[0]", "env.max_steps=100",
-                              "env.replan_every=10", "eval.threads=1"], serves=("cube",))
+                              "env.replan_every=10", "eval.threads=1"])
     p = prepare(cfg)
     store = ResultStore(cfg.eval.out, cfg.eval.run)
     if runner == "local":
@@ -296,7 +295,7 @@ def tiny_double_dense(tiny_double, tmp_path_factory):
     root = tmp_path_factory.mktemp("cube2dense")
     args = [a for a in tiny_double if not a.startswith(("checkpoint=", "jump="))] + [f"checkpoint={root / 'ckpt'}"]
     cfg = load_config(args + ["jump=1", "train.max_steps=2", "train.batch_size=4", "train.val_batches=1",
-                              "train.warmup=1"], method="mctd", serves=("cube",))
+                              "train.warmup=1"], method="mctd")
     torch.manual_seed(0)
     with torch.random.fork_rng():
         train(cfg, train_data(cfg, load_family_dataset(cfg)), root / "ckpt", progress=False)
@@ -306,7 +305,7 @@ def tiny_double_dense(tiny_double, tmp_path_factory):
 @pytest.mark.parametrize("method", ["diffusion-forcing", "mctd-replan", "p-mctd-replan"])
 def test_dense_methods_run_cube_episodes_on_their_own_jump(tiny_double_dense, tmp_path, method):
     """The dense methods as configured (jump=1, 21 frame-stacked tokens per plan), not forced to jump=5."""
-    cfg = load_config([f"method={method}", *tiny_double_dense], serves=("cube",))
+    cfg = load_config([f"method={method}", *tiny_double_dense])
     assert cfg.jump == 1 and hooks_for("cube-double").plan_rules(cfg).value.warp_threshold == cfg.env.warp_dense
     rows = run_grid([f"method={method}", *tiny_double_dense, *SEARCH], tmp_path, "local")
     check_row(rows[0], searched=method != "diffusion-forcing")
@@ -319,7 +318,7 @@ def test_a_missing_cube_policy_is_one_error_naming_the_training_command(tiny_dou
     from fmctd_dist.evaluation.grid import prepare
 
     args = [a for a in tiny_double if not a.startswith("env.policy=")]
-    cfg = load_config(["method=fast-mctd-replan", *args, f"env.policy={tmp_path / 'none'}"], serves=("cube",))
+    cfg = load_config(["method=fast-mctd-replan", *args, f"env.policy={tmp_path / 'none'}"])
     with pytest.raises(CheckpointError) as e:
         prepare(cfg)
     msg = str(e.value)
@@ -330,7 +329,7 @@ def test_a_missing_cube_model_is_one_error_naming_the_training_command(tiny_doub
     from fmctd_dist.evaluation.grid import prepare
 
     args = [a for a in tiny_double if not a.startswith("checkpoint=")]
-    cfg = load_config(["method=fast-mctd-replan", *args, f"checkpoint={tmp_path / 'none'}"], serves=("cube",))
+    cfg = load_config(["method=fast-mctd-replan", *args, f"checkpoint={tmp_path / 'none'}"])
     with pytest.raises(CheckpointError) as e:
         prepare(cfg)
     assert "\n" not in str(e.value) and "python jobs/train.py env=cube-double jump=5" in str(e.value)
@@ -370,7 +369,7 @@ def test_the_cube_diffuser_hint_trains_one_that_plans_cube_episodes(tiny_double,
     args = [a for a in tiny_double if not a.startswith(("checkpoint=", "jump="))]
     args += [f"checkpoint={tmp_path / 'ck'}", "model.unet_channels=[8,16]", "model.unet_edge_frames=2",
              "train.max_steps=2", "train.batch_size=4", "train.val_batches=1", "train.val_every=0"]
-    cfg = load_config(["method=diffuser-replan", *args], serves=("cube",))
+    cfg = load_config(["method=diffuser-replan", *args])
     with pytest.raises(CheckpointError, match="does not exist") as e:
         prepare(cfg)
     (cmd,) = [c for c in re.findall(r"`([^`]+)`", str(e.value)) if "jobs/train.py" in c]
@@ -388,7 +387,7 @@ def test_a_maze_checkpoint_given_to_a_cube_env_is_one_error(tiny_double, tiny_ch
 
     _, maze_ckpt = tiny_checkpoint
     args = [a for a in tiny_double if not a.startswith("checkpoint=")]
-    cfg = load_config(["method=fast-mctd-replan", *args, f"checkpoint={maze_ckpt}"], serves=("cube",))
+    cfg = load_config(["method=fast-mctd-replan", *args, f"checkpoint={maze_ckpt}"])
     with pytest.raises(CheckpointError, match="pointmaze-medium"):
         prepare(cfg)
 

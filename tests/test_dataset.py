@@ -34,7 +34,7 @@ def test_dataset_contents(tiny_dataset):
     steps = np.linalg.norm(np.diff(ds.train, axis=1), axis=-1)
     assert steps.max() <= 0.2 * np.sqrt(2) + 1e-5  # point dynamics: |dxy| <= 0.2 per axis
     assert ds.normaliser.std.min() > 1.0
-    from fmctd_dist.families.maze import maze_geometry
+    from fmctd_dist.families.maze.geometry import maze_geometry
 
     assert maze_geometry("pointmaze-medium").in_free_cell(ds.train).all()
 

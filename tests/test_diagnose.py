@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from fmctd_dist.families.maze import maze_geometry
+from fmctd_dist.families.maze.geometry import maze_geometry
 from fmctd_dist.families.maze.geometry import densify
 from fmctd_dist.families.maze.diagnose import failures
 

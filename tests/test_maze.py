@@ -3,7 +3,9 @@
 import numpy as np
 import pytest
 
-from fmctd_dist.families.maze import make_env, maze_geometry
+from fmctd_dist.families.maze.make import make_env
+
+from fmctd_dist.families.maze.geometry import maze_geometry
 from fmctd_dist.seeding import check_seed
 from fmctd_dist.errors import ConfigError
 

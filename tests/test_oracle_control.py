@@ -5,7 +5,7 @@ import pytest
 
 from fmctd_dist.families.maze.pd import PDController, repeat_waypoints
 from fmctd_dist.families.maze.oracle import NoisyOracle
-from fmctd_dist.families.maze import make_env
+from fmctd_dist.families.maze.make import make_env
 
 BUDGET = {"pointmaze-medium": 500, "pointmaze-large": 500, "pointmaze-giant": 1000}
 

@@ -21,7 +21,6 @@ from fmctd_dist.errors import ConfigError, DatasetError, DeviceError
 
 MEDIUM = "visual-pointmaze-medium"
 OPEN = np.array([[8.0, 8.0], [12.0, 8.0]])  # medium: cells (3, 3) and (3, 4), both free
-VISUAL = ("visual-pointmaze",)
 
 
 @pytest.fixture(scope="module")
@@ -155,20 +154,20 @@ def test_no_gl_is_one_clear_error(monkeypatch):
 
 def test_visual_env_is_refused_by_maze_only_code():
     """Maze-only code gets one ConfigError naming the visual maze's own jobs, not a crash deeper down."""
-    with pytest.raises(ConfigError, match=r"visual maze env \(64x64 images, issue 21\).*jobs/train_visual.py"):
+    with pytest.raises(ConfigError, match=r"is a visual-pointmaze env.*jobs/train_visual.py"):
         from fmctd_dist.families.maze.geometry import maze_geometry
 
         maze_geometry(MEDIUM)
-    cfg = load_config([f"env={MEDIUM}"], serves=VISUAL)  # jobs/render_frames.py's door
+    cfg = load_config([f"env={MEDIUM}"])
     assert cfg.env.name == MEDIUM and cfg.visual.shadowsize == 1024
     with pytest.raises(ConfigError, match="visual.frames"):
-        load_config([f"env={MEDIUM}", "visual.frames=0"], serves=VISUAL)
+        load_config([f"env={MEDIUM}", "visual.frames=0"])
 
 
 def _visual_cfg(root, *extra):
     words = [w for w in TINY_DATA if not w.startswith("env=")]
     return load_config([f"env={MEDIUM}", *words, f"data.root={root}", "visual.frames=6", *extra],
-                       method="mctd", serves=VISUAL)
+                       method="mctd")
 
 
 def test_frames_store_round_trip(tiny_dataset, tmp_path):

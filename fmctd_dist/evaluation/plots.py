@@ -12,7 +12,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 from matplotlib.ticker import FormatStrFormatter, LogLocator, MaxNLocator, NullFormatter  # noqa: E402
 import numpy as np  # noqa: E402
 
-from fmctd_dist.config import ENV_NAMES  # noqa: E402
+from fmctd_dist.registry import env_names  # noqa: E402
 from fmctd_dist.families.maze.geometry import MAZE_UNIT, MazeGeometry  # noqa: E402
 from fmctd_dist.evaluation.results import label  # noqa: E402
 
@@ -69,7 +69,7 @@ def success_vs_time_figure(summary: list[dict[str, Any]]):
     has its own colour in the legend; its config variants are separate points in that colour.
     """
     fig, ax = plt.subplots(figsize=(8, 4))
-    envs = sorted({s["env"] for s in summary}, key=lambda e: (ENV_NAMES.index(e) if e in ENV_NAMES else 99, e))
+    envs = sorted({s["env"] for s in summary}, key=lambda e: (env_names().index(e) if e in env_names() else 99, e))
     markers = dict(zip(envs, "osD^vP<>"))
     # one colour per method; a method's config variants (the table's "[config ...]" lines) share it
     base = lambda s: label(s).split(" [")[0]  # noqa: E731

@@ -19,7 +19,8 @@ from typing import Any
 import numpy as np
 import pyarrow.parquet as pq
 
-from fmctd_dist.config import ANT_ENVS, ENV_NAMES, POINT_ENVS
+from fmctd_dist.families.maze.record import ANT_ENVS, POINT_ENVS
+from fmctd_dist.registry import env_names
 from fmctd_dist.evaluation.paper import paper_cell
 from fmctd_dist.evaluation.identity import row_identity
 from fmctd_dist.evaluation.results import label, summarise
@@ -30,7 +31,7 @@ ANT_ENV_ORDER = list(ANT_ENVS)
 # the paper's robot table: replanning searches only, single / double / triple
 CUBE_METHOD_ORDER = ["diffuser", "diffuser-replan", "diffusion-forcing", "mctd-replan", "p-mctd-replan",
                      "s-mctd-replan", "fast-mctd-replan"]
-CUBE_ENV_ORDER = [e for e in ENV_NAMES if e.startswith("cube-")]
+CUBE_ENV_ORDER = [e for e in env_names() if e.startswith("cube-")]
 
 
 @dataclass(frozen=True)
@@ -238,7 +239,8 @@ def glance_table(rows: list[dict[str, Any]], columns: dict[str, list[str]],
 
 
 def _env_rank(env: str) -> tuple[int, str]:
-    return (ENV_NAMES.index(env) if env in ENV_NAMES else len(ENV_NAMES), env)
+    names = env_names()
+    return (names.index(env) if env in names else len(names), env)
 
 
 def ablation_summary(rows: list[dict[str, Any]], knob: str) -> list[dict[str, Any]]:

@@ -18,7 +18,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 from fmctd_dist.families.cube.data import OGBENCH_EPISODES, episode_seeds, generate_episode  # noqa: E402
 from fmctd_dist.families.cube.env import make_cube_env  # noqa: E402
-from fmctd_dist.registry import CUBE_ENVS  # noqa: E402
+from fmctd_dist.families.cube.record import CUBE_ENVS  # noqa: E402
 
 STEPS = 1001
 

@@ -11,7 +11,7 @@ import numpy as np
 
 from fmctd_dist.cli import run
 from fmctd_dist.families.maze.oracle import NoisyOracle
-from fmctd_dist.families.maze import make_env
+from fmctd_dist.families.maze.make import make_env
 
 BUDGET = {"pointmaze-medium": 500, "pointmaze-large": 500, "pointmaze-giant": 1000}
 

@@ -47,7 +47,7 @@ def main(argv: list[str]) -> int:
                 raise ConfigError(f"frames={frames} must be at least {ROUNDS}")
         else:
             rest.append(a)
-    cfg = load_config(rest, env="visual-pointmaze-medium", method="mctd", serves=("visual-pointmaze",))
+    cfg = load_config(rest, env="visual-pointmaze-medium", method="mctd")
     xy = free_positions(cfg.env.name, frames)
     renderers = {arm: FrameRenderer(cfg.env.name, camera=arm[0], shadowsize=arm[1]) for arm in ARMS}
     for r in renderers.values():

@@ -37,7 +37,7 @@ def bfs_path(geo, task_id: int) -> np.ndarray:
 
 
 def main(argv: list[str]) -> int:
-    cfg = load_config(argv, env=MAZES[0], method="mctd", serves=("visual-pointmaze",))
+    cfg = load_config(argv, env=MAZES[0], method="mctd")
     fig, axes = plt.subplots(len(MAZES), FRAMES + 1, figsize=(2.0 * (FRAMES + 1) + 1.2, 2.6 * len(MAZES)),
                              gridspec_kw={"width_ratios": [2.2] + [1] * FRAMES})
     for row, name in zip(axes, MAZES):

@@ -48,7 +48,7 @@ def main(argv: list[str]) -> int:
             steps = parse_steps(a.split("=", 1)[1])
         else:
             rest.append(a)
-    cfg = load_config(rest, serves=("cube",))
+    cfg = load_config(rest)
     if len(cfg.eval.tasks) != 1 or len(cfg.eval.seeds) != 1:
         raise ConfigError("probe_cube_grasp: give one episode, e.g. tasks=[4] seeds=[1]")
     p = prepare(cfg)

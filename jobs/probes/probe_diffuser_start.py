@@ -52,7 +52,7 @@ with torch.no_grad():
 # step after it, per task, for noise seeds 0-2 (the warp threshold is 1.0).
 from fmctd_dist.denoiser.local import LocalDenoiser  # noqa: E402
 from fmctd_dist.diffusion.checkpoint import normaliser_from_manifest  # noqa: E402
-from fmctd_dist.families.maze import make_env  # noqa: E402
+from fmctd_dist.families.maze.make import make_env  # noqa: E402
 from fmctd_dist.planners import make_planner  # noqa: E402
 
 env = make_env(cfg.env.name)

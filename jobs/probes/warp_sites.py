@@ -25,7 +25,7 @@ from fmctd_dist.config import Config, config_from_dict
 from fmctd_dist.data.tokens import PlanCodec
 from fmctd_dist.denoiser.local import LocalDenoiser
 from fmctd_dist.diffusion.checkpoint import load_checkpoint, normaliser_from_manifest
-from fmctd_dist.families.maze import maze_geometry
+from fmctd_dist.families.maze.geometry import maze_geometry
 from fmctd_dist.families.maze.plan_quality import SAMPLES_PER_TASK, sample_plans
 
 VAL_STARTS = 100

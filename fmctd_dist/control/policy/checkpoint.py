@@ -17,7 +17,7 @@ import torch
 
 from fmctd_dist.control.policy.network import GoalPolicyNet
 from fmctd_dist.control.policy.spec import PolicySpec
-from fmctd_dist.control.policy.specs import BY_KIND, spec_for_env
+from fmctd_dist.control.policy.hooks import policy_kinds, spec_for_env
 from fmctd_dist.diffusion.checkpoint import first_line, read_weights_manifest, save_weights, sha256_file
 from fmctd_dist.errors import CheckpointError
 from fmctd_dist.registry import family
@@ -60,13 +60,13 @@ def read_policy_manifest(ckpt_dir: str | Path, env_name: str | None = None) -> d
     fix = train_fix(env_name or "<env>", ckpt_dir)
     manifest = read_weights_manifest(ckpt_dir, who, f"{fix} (or point policy.out to its dir)", fix)
     kind = manifest.get("kind")
-    have = BY_KIND.get(kind) if isinstance(kind, str) else None
+    have = policy_kinds().get(kind) if isinstance(kind, str) else None
     if have is None or (want is not None and have is not want):
         what = kind or manifest.get("model_kind") or "unknown"
         desc = f" ({OTHER_KINDS[what]})" if what in OTHER_KINDS else f" (the {label(have)})" if have else ""
         for_env = f" for {env_name}" if env_name else ""
         wanted = f"a goal-conditioned {label(want)} (kind={want.kind!r})" if want else \
-            f"a goal-conditioned policy (kind one of {sorted(BY_KIND)})"
+            f"a goal-conditioned policy (kind one of {sorted(policy_kinds())})"
         raise CheckpointError(
             f"{who}: {ckpt_dir} holds a checkpoint of kind {what!r}{desc}, not {wanted}; point policy.out to a dir "
             f"written by jobs/train_policy.py{for_env}, or {train_fix(env_name or '<env>')}"
@@ -107,7 +107,7 @@ def load_policy(ckpt_dir: str | Path, env_name: str | None = None, obs_dim: int 
 
     ckpt_dir = Path(ckpt_dir)
     manifest = read_policy_manifest(ckpt_dir, env_name)
-    spec = BY_KIND[manifest["kind"]]
+    spec = policy_kinds()[manifest["kind"]]
     who = label(spec)
     fix = train_fix(str(manifest.get("env")), ckpt_dir)
     sha = sha256_file(ckpt_dir / MODEL_FILE)

@@ -6,9 +6,3 @@ Env: ``geometry`` (maze, BFS, the OGBench env) -> ``tasks`` (start/goal protocol
 learned ``ant_policy`` (ant), ``robots`` (which one a maze uses). Planning and episodes: ``hooks``,
 ``episode``; measures: ``plan_quality``, ``diagnose``.
 """
-
-from fmctd_dist.families.maze.make import make_env
-from fmctd_dist.families.maze.geometry import MazeGeometry, maze_geometry
-from fmctd_dist.families.maze.pointmaze import PointMaze
-
-__all__ = ["MazeGeometry", "maze_geometry", "PointMaze", "make_env"]

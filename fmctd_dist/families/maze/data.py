@@ -33,7 +33,8 @@ from fmctd_dist.families.maze.point_data import POINT_GENERATOR_VERSION, PointSo
 from fmctd_dist.data.splits import SPLITS, val_episodes
 from fmctd_dist.data.tokens import Normaliser
 from fmctd_dist.errors import DatasetError
-from fmctd_dist.registry import MAZE_FAMILIES, require_family
+from fmctd_dist.families.maze.record import MAZE_KINDS
+from fmctd_dist.registry import require_family
 
 __all__ = ["SPLITS", "sha256_file", "val_episodes", "dataset_dir", "make_dataset", "load_manifest", "load_dataset",
            "NavigateDataset", "regenerate_fix"]  # SPLITS, sha256_file: re-exported for families/visual/frame_sets.py
@@ -73,7 +74,7 @@ def generator_version(env: str) -> int:
 
 def make_dataset(cfg: Config, progress: bool = True) -> tuple[Path, dict[str, Any]]:
     """Generate (or verify an existing) dataset; return its dir and manifest."""
-    require_family(cfg.env.name, MAZE_FAMILIES, "the navigate-data code (families/maze/data.py, used by jobs/train.py)")
+    require_family(cfg.env.name, MAZE_KINDS, "the navigate-data code (families/maze/data.py, used by jobs/train.py)")
     out = dataset_dir(cfg)
     if (out / "manifest.json").exists():
         return out, load_manifest(out, cfg, verify=True)
@@ -231,7 +232,7 @@ def _frame_xy(frames):
 
 
 def load_dataset(cfg: Config, path: Path | None = None) -> NavigateDataset:
-    require_family(cfg.env.name, MAZE_FAMILIES, "the navigate-data code (families/maze/data.py, used by jobs/train.py)")
+    require_family(cfg.env.name, MAZE_KINDS, "the navigate-data code (families/maze/data.py, used by jobs/train.py)")
     path = path or dataset_dir(cfg)
     manifest = load_manifest(path, cfg, verify=True)
     splits = {}
@@ -241,3 +242,23 @@ def load_dataset(cfg: Config, path: Path | None = None) -> NavigateDataset:
                        f"it does not match {path / 'manifest.json'}; {regenerate_fix(path, cfg)}")["observations"]
         splits[split] = np.ascontiguousarray(obs[..., :2], dtype=np.float32)  # ant: x, y of the 29-D state
     return NavigateDataset(path, manifest, splits["train"], splits["val"])
+
+
+def describe(manifest: dict[str, Any]) -> list[str]:
+    """What ``jobs/make_dataset.py`` prints about a navigate dataset: digests, normalisation, the ant data's stats."""
+    lines = [f"  {split}: {manifest['episodes'][split]} episodes x {manifest['episode_steps']} steps  sha256={digest}"
+             for split, digest in manifest["sha256"].items()]
+    lines.append(f"  x, y mean {manifest['obs_mean']}  std {manifest['obs_std']}")
+    if "expert" in manifest:
+        expert = manifest["expert"]
+        lines.append(f"  expert {expert['path']} (digest {expert['digest']}), noise {manifest['noise']}")
+        for split, s in manifest["stats"].items():
+            lines.append(f"  {split}: {s['goals_per_1000_steps']} goals / 1000 steps, "
+                         f"unhealthy {s['unhealthy_fraction']:.2%}, upside down {s['upside_down_fraction']:.2%}, "
+                         f"{s['episodes_fallen']} episodes fell, {s['mean_speed_m_per_s']} m/s")
+        g = manifest["generation"]
+        lines.append(f"  generation {g['wall_s']}s, {g['env_steps_per_s']} env steps/s")
+    return lines
+
+
+make, load = make_dataset, load_dataset  # the family's data protocol (fmctd_dist.registry.Family.data)

@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from fmctd_dist.families.maze import maze_geometry
+from fmctd_dist.families.maze.geometry import maze_geometry
 from fmctd_dist.families.maze.geometry import densify
 
 STILL_STEPS = 200  # a robot whose last STILL_STEPS positions span less than STILL_RANGE stopped

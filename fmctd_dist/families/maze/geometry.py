@@ -16,7 +16,8 @@ import numpy as np
 
 from fmctd_dist.config import TASK_IDS
 from fmctd_dist.errors import ConfigError
-from fmctd_dist.registry import MAZE_FAMILIES, require_family
+from fmctd_dist.families.maze.record import MAZE_KINDS
+from fmctd_dist.registry import require_family
 
 MAZE_UNIT = 4.0
 OFFSET = 4.0  # OGBench: cell (i, j) centre = (4j - 4, 4i - 4)
@@ -149,7 +150,7 @@ def densify(path: np.ndarray, per_step: int = 10) -> np.ndarray:
 
 def check_env_name(name: str) -> str:
     """``name`` if it is a maze env; an unknown name or a cube env is one ConfigError."""
-    return require_family(name, MAZE_FAMILIES, "the maze code (geometry, PointMaze / AntMaze episodes)")
+    return require_family(name, MAZE_KINDS, "the maze code (geometry, PointMaze / AntMaze episodes)")
 
 
 @lru_cache(maxsize=None)

@@ -38,7 +38,7 @@ def plan_rules(cfg: Config) -> MazeRules:
     m = cfg.method
     crosses_wall = None
     if m.wall_test:  # not the paper's: the maze's cells say which steps cross a wall
-        from fmctd_dist.families.maze import maze_geometry
+        from fmctd_dist.families.maze.geometry import maze_geometry
 
         crosses_wall = maze_geometry(cfg.env.name).steps_cross_wall
     return MazeRules(tuple(float(s) for s in m.guidance_scales), float(m.guidance_scale),
@@ -56,7 +56,7 @@ class MazeEpisodes:
     """The maze env + its controller factory, built once; :func:`evaluation.episode.run_episode` per episode."""
 
     def __init__(self, cfg: Config):
-        from fmctd_dist.families.maze import make_env
+        from fmctd_dist.families.maze.make import make_env
         from fmctd_dist.families.maze.robots import controller_factory
 
         self.cfg = cfg
@@ -76,7 +76,7 @@ def episodes(cfg: Config) -> MazeEpisodes:
 
 def plot_episode(row: dict[str, Any], path: Path) -> Path:
     """The first plan and the executed trajectory on the maze."""
-    from fmctd_dist.families.maze import maze_geometry
+    from fmctd_dist.families.maze.geometry import maze_geometry
     from fmctd_dist.evaluation.plots import plot_episode as plot_maze_episode
 
     return plot_maze_episode(row, maze_geometry(row["env"]), path)

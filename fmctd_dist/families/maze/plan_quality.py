@@ -30,7 +30,7 @@ from fmctd_dist.denoiser.local import LocalDenoiser
 from fmctd_dist.denoiser.protocol import DenoiseBatch
 from fmctd_dist.diffusion.checkpoint import load_checkpoint, normaliser_from_manifest
 from fmctd_dist.diffusion.schedule import PyramidSchedule
-from fmctd_dist.families.maze import maze_geometry
+from fmctd_dist.families.maze.geometry import maze_geometry
 from fmctd_dist.planners.diffuser import uniform_levels
 
 SAMPLES_PER_TASK = 20

@@ -144,7 +144,7 @@ def load_parts_args(args: list[str] | None = None) -> tuple[Config, PartsConfig,
             cfg_words.append(arg)
     if not part:
         raise ConfigError(f"part= is missing; choose one of: {', '.join(PARTS)} (in that order: each needs the last)")
-    cfg = load_config(cfg_words, env="visual-pointmaze-medium", method="mctd", serves=("visual-pointmaze",))
+    cfg = load_config(cfg_words, env="visual-pointmaze-medium", method="mctd")
     require_family(cfg.env.name, (VISUAL_FAMILY,), "the visual maze's VAE, estimator and inverse dynamics")
     obj: PartsConfig = OmegaConf.to_object(pcfg)  # type: ignore[assignment]
     validate_parts(obj)

@@ -138,3 +138,11 @@ def load_visual_dataset(cfg: Config) -> VisualLatentDataset:
 
 
 __all__ = ["VisualLatentDataset", "make_visual_dataset", "load_visual_dataset", "LATENT_KEY"]
+
+
+def describe(manifest: dict[str, Any]) -> list[str]:
+    """What ``jobs/make_dataset.py`` prints about the visual planner's latent dataset (its manifest's keys)."""
+    return [f"  {k}: {v}" for k, v in manifest.items() if not isinstance(v, (dict, list))]
+
+
+make, load = make_visual_dataset, load_visual_dataset  # the family's data protocol (fmctd_dist.registry.Family.data)

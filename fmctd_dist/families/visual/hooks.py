@@ -141,7 +141,7 @@ def episodes(cfg: Config) -> VisualEpisodes:
 
 def plot_episode(row: dict[str, Any], path: Path) -> Path:
     """The first plan as the estimator reads it and the executed trajectory, on the point maze's map."""
-    from fmctd_dist.families.maze import maze_geometry
+    from fmctd_dist.families.maze.geometry import maze_geometry
     from fmctd_dist.families.visual.env import point_env_name
     from fmctd_dist.evaluation.plots import plot_episode as plot_maze_episode
 
