@@ -22,7 +22,6 @@ from omegaconf import MISSING, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
 from fmctd_dist.errors import ConfigError, did_you_mean, unknown_name
-from fmctd_dist.families.maze.record import ANT_ENVS, MAZE_KINDS
 from fmctd_dist.registry import env_config_dir, env_field_readers, env_names, family, require_family, state_dim
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
@@ -447,7 +446,7 @@ class Config:
 
 def is_ant(env_name: str) -> bool:
     """AntMaze (29-D ant state, 8-D torque actions) rather than PointMaze (2-D position and action)."""
-    return env_name in ANT_ENVS
+    return family(env_name) == "antmaze"
 
 
 def git_sha() -> str:
@@ -613,7 +612,7 @@ def validate(cfg: Config) -> None:
         raise ConfigError(f"visual.plan_xy=true adds the position estimator's (x, y) to a visual maze's latent "
                           f"frames; env.name={cfg.env.name} ({family(cfg.env.name)}) has no latents. "
                           "Drop visual.plan_xy")
-    if cfg.method.wall_test and family(cfg.env.name) not in MAZE_KINDS:
+    if cfg.method.wall_test and family(cfg.env.name) not in ("pointmaze", "antmaze"):
         raise ConfigError(f"method.wall_test=true needs a point or ant maze (the walls come from its cells); "
                           f"env.name={cfg.env.name} ({family(cfg.env.name)}) has none. Drop method.wall_test")
     if cfg.model.kind == "diffuser" and cfg.method.planner != "diffuser":

@@ -16,11 +16,11 @@ another family stops there with one ConfigError naming what to run instead.
 from __future__ import annotations
 
 import importlib
-from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
 
 from fmctd_dist.errors import ConfigError, unknown_name
+from fmctd_dist.records import EnvSpec, Family  # noqa: F401 - re-exported for the record modules' readers
 
 # family name -> the module holding its record
 FAMILIES: dict[str, str] = {
@@ -28,30 +28,6 @@ FAMILIES: dict[str, str] = {
     "cube": "fmctd_dist.families.cube.record",
     "visual": "fmctd_dist.families.visual.record",
 }
-
-
-@dataclass(frozen=True)
-class EnvSpec:
-    """One env name: its kind (the robot or setting its rules are keyed by) and the planner state."""
-
-    name: str  # e.g. pointmaze-medium, cube-double
-    family: str  # the kind: pointmaze | antmaze | cube | visual-pointmaze (several kinds may share a package)
-    state_dim: int  # planner state per frame: maze x, y (2) | cube xyz in obs units (3 per cube)
-    state: str  # what the planner state is, in words (for messages and manifests)
-    policy: str = ""  # "module:Class" of its learned low-level policy's hooks ("" = none: e.g. the point's PD law)
-    env_fields: tuple[str, ...] = ()  # the env config fields only some envs read, that this one reads
-
-
-@dataclass(frozen=True)
-class Family:
-    """What a family brings. Modules are named, not imported: the record stays light."""
-
-    name: str  # maze | cube | visual
-    envs: tuple[EnvSpec, ...]
-    hooks: str  # module with plan_rules, check_episodes, episodes, plot_episode [, guide_map] (fmctd_dist.family)
-    data: str  # module with make(cfg, progress) -> (dir, manifest), load(cfg) -> dataset, describe(manifest)
-    configs: str = ""  # folder holding env/<name>.yaml for its envs; "" = the repository's configs/
-    hint: str = ""  # what to run for this family, named when a job built for others refuses one of its envs
 
 
 @cache

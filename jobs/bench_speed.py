@@ -38,7 +38,7 @@ from fmctd_dist.denoiser.local import LocalDenoiser
 from fmctd_dist.denoiser.runtime import option_overrides
 from fmctd_dist.device import set_threads
 from fmctd_dist.diffusion.checkpoint import load_checkpoint, normaliser_from_manifest
-from fmctd_dist.families.maze.episode import describe
+from fmctd_dist.evaluation.results import describe
 from fmctd_dist.evaluation.grid import missing, prepare, provenance, same_policy
 from fmctd_dist.evaluation.results import ResultStore
 from fmctd_dist.family import hooks_for

@@ -1,6 +1,6 @@
 """Regenerate the evaluation tables and figures of docs/results.md from the Parquet rows.
 
-    python jobs/report.py                          # results/ -> docs/results.md + docs/figures/ + checkpoints/README.md
+    python jobs/report.py          # results/ -> docs/results.md + docs/figures/ + checkpoints/README.md + README.md
     python jobs/report.py results=/tmp/res doc=/tmp/results.md
     python jobs/report.py --checkpoints            # only checkpoints/README.md, from the checkpoints' manifests
 
@@ -39,11 +39,13 @@ from fmctd_dist.cli import run
 from fmctd_dist.config import REPO_ROOT, Config, load_config, resolve_path
 from fmctd_dist.families.maze.geometry import maze_geometry
 from fmctd_dist.evaluation.identity import config_hash
-from fmctd_dist.evaluation.plots import plot_ablation, plot_episode, plot_success_vs_time
+from fmctd_dist.evaluation.plots import plot_ablation, plot_success_vs_time
+from fmctd_dist.families.maze.plots import plot_episode
 from fmctd_dist.evaluation.report import ABLATIONS, ANT_ENV_ORDER, CUBE_ENV_ORDER, CUBE_METHOD_ORDER, ENV_ORDER, \
     METHOD_ORDER, ablation_summary, ablation_table, current_rows, fill_markers, glance_table, load_rows, \
     maze_table, merge_rows, row_key, superseded
-from fmctd_dist.evaluation.results import summarise
+from fmctd_dist.evaluation.results import markdown_table, summarise
+from fmctd_dist.families.visual.record import VISUAL_ENVS
 from fmctd_dist.families.visual.table import visual_table
 from fmctd_dist.errors import ConfigError
 
@@ -99,8 +101,8 @@ def main(argv: list[str]) -> int:
     main_rows = merge_rows(committed, fresh, "main")
     all_rows += main_rows
     maze_shipped = shipped_digests(ENV_ORDER + ANT_ENV_ORDER, METHOD_ORDER)  # the maze, AntMaze and glance tables'
-    if main_rows:
-        point_rows = [r for r in main_rows if r["env"] in ENV_ORDER]
+    point_rows = [r for r in main_rows if r["env"] in ENV_ORDER]
+    if point_rows:
         sections["maze"] = maze_table(point_rows, shipped=maze_shipped)
         if any(r["env"] in ANT_ENV_ORDER for r in main_rows):
             sections["antmaze"] = maze_table(main_rows, ANT_ENV_ORDER, shipped=maze_shipped)
@@ -141,6 +143,11 @@ def main(argv: list[str]) -> int:
     if "<!-- report:visual -->" in text:
         sections["visual"] = visual_table(archived_rows)
 
+    # any other family's rows of run main (a family added after the paper's): the table jobs/eval.py prints
+    paper_envs = set(ENV_ORDER + ANT_ENV_ORDER + CUBE_ENV_ORDER + list(VISUAL_ENVS))
+    if "<!-- report:families -->" in text:
+        sections["families"] = markdown_table(summarise([r for r in main_rows if r["env"] not in paper_envs]))
+
     # the at-a-glance block at the top of the doc: the maze and robot lines above, one success cell each
     if "<!-- report:glance -->" in text:
         columns = {**{e: METHOD_ORDER for e in ENV_ORDER + ANT_ENV_ORDER},
@@ -155,6 +162,10 @@ def main(argv: list[str]) -> int:
         print(f"## {name}\n{body}\n")
     if doc == resolve_path("docs/results.md"):  # the project's docs, not a copy elsewhere (tests write to tmp)
         print(f"wrote {write_index().relative_to(REPO_ROOT)}")
+        if "glance" in sections:  # the README shows the same glance table
+            readme = REPO_ROOT / "README.md"
+            readme.write_text(fill_markers(readme.read_text(), {"glance": sections["glance"]}))
+            print("wrote README.md (its glance block)")
     print(f"{len(all_rows)} rows ({len(fresh)} fresh from {root}, the rest from {lean_path.name}); "
           f"updated {len(sections)} blocks in "
           f"{doc.relative_to(REPO_ROOT) if doc.is_relative_to(REPO_ROOT) else doc}; figures in {figures}")

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fmctd_dist.data.tokens import Normaliser, PlanCodec
+from fmctd_dist.tokens import Normaliser, PlanCodec
 from fmctd_dist.denoiser.protocol import DenoiseBatch, DenoiseResult
 from fmctd_dist.diffusion.schedule import PyramidSchedule
 

@@ -9,7 +9,7 @@ import pytest
 from conftest import TINY_DATA
 from fmctd_dist.config import load_config
 from fmctd_dist.families.maze.data import dataset_dir, load_dataset, make_dataset
-from fmctd_dist.data.tokens import Normaliser, PlanCodec, frames_to_tokens, tokens_to_frames
+from fmctd_dist.tokens import Normaliser, PlanCodec, frames_to_tokens, tokens_to_frames
 from fmctd_dist.data.windows import WindowSampler, start_balance_cdf, train_data
 from fmctd_dist.errors import ConfigError, DatasetError
 

@@ -82,3 +82,38 @@ def test_the_checker_finds_a_cycle():
 def test_no_import_cycle_in_the_package():
     found = cycles(import_graph())
     assert not found, f"import cycles (put what both sides share in a module below them): {found}"
+
+
+CORE = ("search", "denoiser", "diffusion", "planners", "evaluation", "data", "control")  # name no family
+
+
+def dispatch_edges() -> dict[str, set[str]]:
+    """module -> the fmctd_dist modules it names in string constants (``importlib.import_module`` dispatch:
+    the registry's records, a record's hooks / data / policy modules), for modules that import importlib."""
+    mods = {".".join(f.relative_to(PACKAGE.parent).with_suffix("").parts).removesuffix(".__init__"): f
+            for f in PACKAGE.rglob("*.py")}
+    edges: dict[str, set[str]] = {}
+    for m, f in mods.items():
+        tree = ast.parse(f.read_text())
+        names = {n.value.split(":")[0] for n in ast.walk(tree)
+                 if isinstance(n, ast.Constant) and isinstance(n.value, str)}
+        edges[m] = {n for n in names if n in mods and n != m}
+    return edges
+
+
+def test_family_records_are_light():
+    # the registry imports every record by name: a record imports nothing of ours but the record types
+    graph = import_graph()
+    heavy = {m: sorted(graph[m] - {"fmctd_dist.records"}) for m in graph if m.endswith(".record")}
+    assert heavy and not any(heavy.values()), heavy
+
+
+def test_the_core_imports_no_family():
+    # docs/design.md §2: the core asks the registry and the family protocol; a family's package is never imported
+    # from below, statically or by name (the registry's own dispatch to the records is the one door)
+    graph = import_graph()
+    for m, targets in dispatch_edges().items():
+        graph[m] |= targets
+    wrong = sorted(f"{m} -> {t}" for m, ts in graph.items() for t in ts
+                   if m.split(".")[1] in CORE and t.startswith("fmctd_dist.families."))
+    assert not wrong, wrong

@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from fmctd_dist.families.maze.pd import PDController, repeat_waypoints
+from fmctd_dist.families.maze.pd import PDController
+from fmctd_dist.planners.base import repeat_waypoints
 from fmctd_dist.families.maze.oracle import NoisyOracle
 from fmctd_dist.families.maze.make import make_env
 

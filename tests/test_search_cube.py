@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from fakes import FakeDenoiser, assert_golden, make_schedule
-from fmctd_dist.data.tokens import Normaliser, PlanCodec
+from fmctd_dist.tokens import Normaliser, PlanCodec
 from fmctd_dist.search.actions import object_actions
 from fmctd_dist.families.cube.value import PARTIAL, CubeValue
 from fmctd_dist.search.loop import EARLY_STOP, STATUS_ACHIEVED, SearchParams, search

@@ -9,7 +9,7 @@ import pytest
 import torch
 
 from fmctd_dist.config import Config, load_config
-from fmctd_dist.data.tokens import Normaliser
+from fmctd_dist.tokens import Normaliser
 from fmctd_dist.diffusion.checkpoint import load_checkpoint, load_train_state
 from fmctd_dist.diffusion.model import DFTransformer
 from fmctd_dist.diffusion.train import DFLoss, lr_at, train

@@ -162,7 +162,7 @@ def test_guided_denoiser_moves_estimated_positions_toward_the_goal():
 
 def test_latent_controller_targets_interpolate_the_sparse_plan():
     from fmctd_dist.families.visual.latent_path import LatentPathController, latent_targets
-    from fmctd_dist.families.maze.pd import repeat_waypoints
+    from fmctd_dist.planners.base import repeat_waypoints
 
     plan = np.array([[1.0, 0.0], [2.0, 1.0]])
     t = latent_targets(repeat_waypoints(plan, 5), 5, np.zeros(2))

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from fmctd_dist.data.tokens import Normaliser, context_token, frames_to_tokens
+from fmctd_dist.tokens import Normaliser, context_token, frames_to_tokens
 
 
 class WindowSampler:

@@ -24,7 +24,7 @@ import torch
 from torch import nn
 
 from fmctd_dist.config import REPO_ROOT, Config, ModelConfig, resolve_path
-from fmctd_dist.data.tokens import Normaliser
+from fmctd_dist.tokens import Normaliser
 from fmctd_dist.diffusion.model import DFTransformer
 from fmctd_dist.diffusion.models import build_model, diffusion_config_from_dict, model_config_from_dict
 from fmctd_dist.errors import CheckpointError

@@ -27,7 +27,7 @@ import torch
 from tqdm import tqdm
 
 from fmctd_dist.config import Config, git_sha, resolve_path
-from fmctd_dist.data.tokens import Normaliser
+from fmctd_dist.tokens import Normaliser
 from fmctd_dist.device import resolve_device, set_threads, warn_bf16
 from fmctd_dist.diffusion.checkpoint import (
     check_compatible, lineage, load_checkpoint, load_init_weights, load_train_state, module_state,

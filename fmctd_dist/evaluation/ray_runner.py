@@ -45,7 +45,7 @@ from tqdm.auto import tqdm
 from fmctd_dist.config import Config, load_config
 from fmctd_dist.denoiser.ray_pool import DenoiserPool, RayDenoiser, auto_actors, unwrap_ray_error
 from fmctd_dist.errors import ConfigError, DeviceError
-from fmctd_dist.families.maze.episode import describe
+from fmctd_dist.evaluation.results import describe
 from fmctd_dist.evaluation.grid import Prepared, grid, missing, prepare, provenance
 from fmctd_dist.evaluation.results import ResultStore
 from fmctd_dist.planners.base import PlanOutput

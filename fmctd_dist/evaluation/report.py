@@ -19,15 +19,14 @@ from typing import Any
 import numpy as np
 import pyarrow.parquet as pq
 
-from fmctd_dist.families.maze.record import ANT_ENVS, POINT_ENVS
-from fmctd_dist.registry import env_names
+from fmctd_dist.registry import env_names, family
 from fmctd_dist.evaluation.paper import paper_cell
 from fmctd_dist.evaluation.identity import row_identity
 from fmctd_dist.evaluation.results import label, summarise
 
 METHOD_ORDER = ["diffuser", "diffuser-replan", "diffusion-forcing", "mctd", "p-mctd", "s-mctd", "fast-mctd"]
-ENV_ORDER = list(POINT_ENVS)  # the paper's order: medium, large, giant
-ANT_ENV_ORDER = list(ANT_ENVS)
+ENV_ORDER = [e for e in env_names() if family(e) == "pointmaze"]  # the paper's order: medium, large, giant
+ANT_ENV_ORDER = [e for e in env_names() if family(e) == "antmaze"]
 # the paper's robot table: replanning searches only, single / double / triple
 CUBE_METHOD_ORDER = ["diffuser", "diffuser-replan", "diffusion-forcing", "mctd-replan", "p-mctd-replan",
                      "s-mctd-replan", "fast-mctd-replan"]

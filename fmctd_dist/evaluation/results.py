@@ -138,3 +138,12 @@ def markdown_table(summary: list[dict[str, Any]]) -> str:
                      f"{timed_out} | {s['plan_time_s']:.2f} ± {s['plan_time_std']:.2f} | "
                      f"{100 * s['denoise_share']:.0f}% | {per_task} | {paper_cell(s['method'], s['env'])} |")
     return "\n".join(lines)
+
+
+def describe(row: dict[str, Any]) -> str:
+    """One line per episode for logs: outcome, planning time and the share inside the denoiser."""
+    outcome = "success" if row["success"] else ("TIMED OUT" if row["timed_out"] else "failure")
+    return (f"{row['method']} {row['env']} task {row['task']} seed {row['seed']}: {outcome} after "
+            f"{row['env_steps']} steps; planning {row['plan_time_s']:.2f}s "
+            f"({100 * row['denoise_share']:.1f}% in denoiser), {row['expansions']} expansions, "
+            f"{row['iterations']} iterations")

@@ -33,3 +33,8 @@ class Planner(Protocol):
 def plan_seed(*keys: int) -> int:
     """A 63-bit seed from integer keys, e.g. (config seed, task, episode seed, replan index)."""
     return int(np.random.SeedSequence([int(k) for k in keys]).generate_state(2, dtype=np.uint64)[0] >> np.uint64(1))
+
+
+def repeat_waypoints(plan: np.ndarray, jump: int) -> np.ndarray:
+    """[F, 2] coarse plan -> [F * jump, 2]: each waypoint held for ``jump`` env steps (S-MCTD)."""
+    return np.repeat(np.asarray(plan), jump, axis=0)

@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from fmctd_dist.config import Config
-from fmctd_dist.data.tokens import Normaliser
+from fmctd_dist.tokens import Normaliser
 from fmctd_dist.denoiser.protocol import Denoiser
 from fmctd_dist.planners.fixed import FixedSchedulePlanner
 

@@ -8,7 +8,7 @@ the episode loop's job (``method.replan_every``).
 from __future__ import annotations
 
 from fmctd_dist.config import Config
-from fmctd_dist.data.tokens import Normaliser
+from fmctd_dist.tokens import Normaliser
 from fmctd_dist.denoiser.protocol import Denoiser
 from fmctd_dist.diffusion.schedule import PyramidSchedule
 from fmctd_dist.planners.fixed import FixedSchedulePlanner

@@ -13,8 +13,8 @@ import time
 import numpy as np
 
 from fmctd_dist.config import Config
-from fmctd_dist.families.maze.pd import repeat_waypoints
-from fmctd_dist.data.tokens import Normaliser, PlanCodec
+from fmctd_dist.planners.base import repeat_waypoints
+from fmctd_dist.tokens import Normaliser, PlanCodec
 from fmctd_dist.denoiser.protocol import Denoiser
 from fmctd_dist.diffusion.schedule import PyramidSchedule
 from fmctd_dist.family import hooks_for

@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
-from fmctd_dist.data.tokens import PlanCodec
+from fmctd_dist.tokens import PlanCodec
 from fmctd_dist.denoiser.protocol import DenoiseBatch, Denoiser, pad_levels
 from fmctd_dist.diffusion.schedule import PyramidSchedule
 from fmctd_dist.search.actions import Actions, scale_actions

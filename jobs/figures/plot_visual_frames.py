@@ -19,7 +19,7 @@ from fmctd_dist.cli import run  # noqa: E402
 from fmctd_dist.config import REPO_ROOT, load_config  # noqa: E402
 from fmctd_dist.families.maze.geometry import maze_geometry  # noqa: E402
 from fmctd_dist.families.visual.env import point_env_name, render_states  # noqa: E402
-from fmctd_dist.evaluation.plots import draw_maze  # noqa: E402
+from fmctd_dist.families.maze.plots import draw_maze  # noqa: E402
 
 MAZES = ("visual-pointmaze-medium", "visual-pointmaze-large")
 FRAMES = 6

@@ -26,7 +26,7 @@ from fmctd_dist.device import set_threads  # noqa: E402
 from fmctd_dist.diffusion.checkpoint import normaliser_from_manifest, read_manifest  # noqa: E402
 from fmctd_dist.families.maze.geometry import maze_geometry  # noqa: E402
 from fmctd_dist.families.visual.env import point_env_name, render_states  # noqa: E402
-from fmctd_dist.evaluation.plots import draw_maze  # noqa: E402
+from fmctd_dist.families.maze.plots import draw_maze  # noqa: E402
 from fmctd_dist.family import hooks_for  # noqa: E402
 from fmctd_dist.planners import make_planner  # noqa: E402
 

@@ -19,7 +19,7 @@ import numpy as np
 
 from fmctd_dist.cli import run
 from fmctd_dist.config import load_config
-from fmctd_dist.families.maze.pd import repeat_waypoints
+from fmctd_dist.planners.base import repeat_waypoints
 from fmctd_dist.device import set_threads
 from fmctd_dist.families.maze.geometry import maze_geometry
 from fmctd_dist.families.visual.env import point_env_name, render_states

@@ -22,7 +22,7 @@ import numpy as np
 
 from fmctd_dist.cli import run
 from fmctd_dist.config import Config, config_from_dict
-from fmctd_dist.data.tokens import PlanCodec
+from fmctd_dist.tokens import PlanCodec
 from fmctd_dist.denoiser.local import LocalDenoiser
 from fmctd_dist.diffusion.checkpoint import load_checkpoint, normaliser_from_manifest
 from fmctd_dist.families.maze.geometry import maze_geometry

@@ -45,7 +45,7 @@ from fmctd_dist.config import Config, resolve_path
 from fmctd_dist.data.manifest_io import read_manifest_json, sha256_file
 from fmctd_dist.data.npz import save_npz
 from fmctd_dist.data.splits import SPLITS, val_episodes
-from fmctd_dist.data.tokens import Normaliser
+from fmctd_dist.tokens import Normaliser
 from fmctd_dist.families.cube.env import ACT_DIM, cube_columns, make_cube_env, n_cubes, obs_dim, to_obs_units
 from fmctd_dist.errors import DatasetError
 from fmctd_dist.registry import env_names, family, require_family

@@ -1,6 +1,6 @@
 """The cube family's registry record: OGBench cube-single, -double and -triple with the robot arm."""
 
-from fmctd_dist.registry import EnvSpec, Family
+from fmctd_dist.records import EnvSpec, Family
 
 CUBE_TYPES = ("single", "double", "triple")  # OGBench CubeEnv env_type
 CUBE_ENVS = tuple(f"cube-{c}" for c in CUBE_TYPES)

@@ -31,7 +31,7 @@ from fmctd_dist.data.manifest_io import read_manifest_json, sha256_file
 from fmctd_dist.data.npz import load_npz, save_npz
 from fmctd_dist.families.maze.point_data import POINT_GENERATOR_VERSION, PointSource
 from fmctd_dist.data.splits import SPLITS, val_episodes
-from fmctd_dist.data.tokens import Normaliser
+from fmctd_dist.tokens import Normaliser
 from fmctd_dist.errors import DatasetError
 from fmctd_dist.families.maze.record import MAZE_KINDS
 from fmctd_dist.registry import require_family

@@ -72,12 +72,3 @@ def maze_row(cfg: Config, task: int, seed: int, success: bool, timed_out: bool, 
         "plan_xy": np.asarray(plan_xy, np.float32).reshape(-1).tolist(),
         "traj_xy": np.asarray(traj, np.float32).reshape(-1).tolist(),
     }
-
-
-def describe(row: dict[str, Any]) -> str:
-    """One line per episode for logs: outcome, planning time and the share inside the denoiser."""
-    outcome = "success" if row["success"] else ("TIMED OUT" if row["timed_out"] else "failure")
-    return (f"{row['method']} {row['env']} task {row['task']} seed {row['seed']}: {outcome} after "
-            f"{row['env_steps']} steps; planning {row['plan_time_s']:.2f}s "
-            f"({100 * row['denoise_share']:.1f}% in denoiser), {row['expansions']} expansions, "
-            f"{row['iterations']} iterations")

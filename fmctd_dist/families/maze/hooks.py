@@ -77,6 +77,6 @@ def episodes(cfg: Config) -> MazeEpisodes:
 def plot_episode(row: dict[str, Any], path: Path) -> Path:
     """The first plan and the executed trajectory on the maze."""
     from fmctd_dist.families.maze.geometry import maze_geometry
-    from fmctd_dist.evaluation.plots import plot_episode as plot_maze_episode
+    from fmctd_dist.families.maze.plots import plot_episode as plot_maze_episode
 
     return plot_maze_episode(row, maze_geometry(row["env"]), path)

@@ -11,11 +11,6 @@ from __future__ import annotations
 import numpy as np
 
 
-def repeat_waypoints(plan: np.ndarray, jump: int) -> np.ndarray:
-    """[F, 2] coarse plan -> [F * jump, 2]: each waypoint held for ``jump`` env steps (S-MCTD)."""
-    return np.repeat(np.asarray(plan), jump, axis=0)
-
-
 class PDController:
     """Follows a dense waypoint sequence one waypoint per env step, open loop in time."""
 

@@ -25,7 +25,7 @@ import numpy as np
 import torch
 
 from fmctd_dist.config import Config, config_from_dict
-from fmctd_dist.data.tokens import PlanCodec
+from fmctd_dist.tokens import PlanCodec
 from fmctd_dist.denoiser.local import LocalDenoiser
 from fmctd_dist.denoiser.protocol import DenoiseBatch
 from fmctd_dist.diffusion.checkpoint import load_checkpoint, normaliser_from_manifest
@@ -115,7 +115,7 @@ def precision(ckpt: Path, batch: int = 64, timesteps: tuple[int, ...] = ()) -> d
     unit (a model that ignores its start: ~0).
     """
     from fmctd_dist.families.maze.data import load_dataset
-    from fmctd_dist.data.tokens import tokens_to_frames
+    from fmctd_dist.tokens import tokens_to_frames
     from fmctd_dist.data.windows import train_data
     from fmctd_dist.diffusion.schedule import alphas_cumprod, make_betas
 

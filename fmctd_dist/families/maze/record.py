@@ -1,6 +1,6 @@
 """The maze family's registry record: PointMaze and AntMaze, medium / large / giant."""
 
-from fmctd_dist.registry import EnvSpec, Family
+from fmctd_dist.records import EnvSpec, Family
 
 MAZES = ("medium", "large", "giant")
 POINT_ENVS = tuple(f"pointmaze-{m}" for m in MAZES)

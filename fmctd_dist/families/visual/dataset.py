@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from fmctd_dist.config import Config
-from fmctd_dist.data.tokens import Normaliser
+from fmctd_dist.tokens import Normaliser
 from fmctd_dist.errors import DatasetError
 from fmctd_dist.registry import require_family, state_dim
 from fmctd_dist.hints import shown

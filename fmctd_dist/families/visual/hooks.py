@@ -143,6 +143,6 @@ def plot_episode(row: dict[str, Any], path: Path) -> Path:
     """The first plan as the estimator reads it and the executed trajectory, on the point maze's map."""
     from fmctd_dist.families.maze.geometry import maze_geometry
     from fmctd_dist.families.visual.env import point_env_name
-    from fmctd_dist.evaluation.plots import plot_episode as plot_maze_episode
+    from fmctd_dist.families.maze.plots import plot_episode as plot_maze_episode
 
     return plot_maze_episode(row, maze_geometry(point_env_name(row["env"])), path)

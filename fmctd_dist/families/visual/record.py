@@ -1,6 +1,6 @@
 """The visual maze family's registry record: the point maze seen through a 64x64 chase camera."""
 
-from fmctd_dist.registry import EnvSpec, Family
+from fmctd_dist.records import EnvSpec, Family
 
 VISUAL_ENVS = ("visual-pointmaze-medium", "visual-pointmaze-large")
 
