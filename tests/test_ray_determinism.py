@@ -13,7 +13,7 @@ import ray
 from fmctd_dist.config import load_config
 from fmctd_dist.denoiser.local import LocalDenoiser
 from fmctd_dist.denoiser.protocol import DenoiseBatch, micro_batch_indices
-from fmctd_dist.denoiser.ray_pool import DenoiserPool
+from fmctd_dist.denoiser.ray_pool import DenoiserPool, RayDenoiser
 from fmctd_dist.diffusion.checkpoint import normaliser_from_manifest, read_manifest
 from fmctd_dist.evaluation.grid import prepare
 from fmctd_dist.evaluation.ray_runner import PlannerDriver
@@ -35,7 +35,8 @@ def prepared(tiny_checkpoint):
 
 @pytest.fixture(scope="module")
 def pools(prepared, ray_cluster):
-    """Pools of 1 and 2 actors (created once; the cluster has 2 logical CPUs, so one at a time)."""
+    """``pools(n)``: a pool of n actors, created once and shared by the module's tests (the cluster has 2
+    logical CPUs, so one pool at a time). The tests ask for 2; "1 actor" is a view of one of them."""
     made = {}
 
     def get(n):
@@ -143,12 +144,15 @@ def test_ray_denoiser_matches_local_bitwise_with_guidance_masks(prepared, pools)
 def test_plan_identical_local_one_and_two_actors(prepared, pools):
     ref = local_plan(prepared)
     assert ref[0].status != "stay" and ref[0].expansions >= 24
-    pool = pools(1)
-    assert pool.infos[0]["device"] == "cpu" and pool.infos[0]["gpu_ids"] == []
-    assert pool.infos[0]["niceness"] == os.nice(0)  # not Ray's default 15: timings hold on a shared machine
-    assert_same(plan_with(prepared, pool.denoiser()), ref)
     two = pools(2)
     assert len({i["pid"] for i in two.infos}) == 2
+    for info in two.infos:
+        assert info["device"] == "cpu" and info["gpu_ids"] == []
+        assert info["niceness"] == os.nice(0)  # not Ray's default 15: timings hold on a shared machine
+    # 1 Ray actor: a RayDenoiser over one of the pool's actors sends it every segment, as a pool of 1 would
+    # (RayDenoiser only sees its actor handles), without starting a third actor process and then the pair again
+    one = RayDenoiser.from_config(two.actors[:1], prepared.cfg)
+    assert_same(plan_with(prepared, one), ref)
     assert_same(plan_with(prepared, two.denoiser()), ref)
 
 
