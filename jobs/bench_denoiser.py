@@ -229,9 +229,9 @@ def main(argv: list[str]) -> None:
                          "dirs such as checkpoints/pointmaze-medium-h5 (--help for the modes)")
     if argv and argv[0] == "--throughput":
         # --throughput [options=fp32,bf16,compiled,bf16+compiled] [batches=1,25,200] [tokens=11,21,51,101] [device=cpu]
-        #   [clock=wall|cpu] [reps=3] [rounds=5]
+        #   [clock=wall|cpu] [reps=3] [rounds=5] [layers=6] (layers: the model's depth; the dry runs use 1)
         kw = dict(a.split("=", 1) for a in argv[1:])
-        unknown = set(kw) - {"options", "batches", "tokens", "device", "clock", "reps", "rounds"}
+        unknown = set(kw) - {"options", "batches", "tokens", "device", "clock", "reps", "rounds", "layers"}
         if kw.get("clock", "wall") not in CLOCKS:
             raise SystemExit(f"bench_denoiser --throughput: clock={kw['clock']!r} is not one of {', '.join(CLOCKS)}")
         opts = tuple(kw.get("options", "fp32,bf16").split(","))
@@ -243,7 +243,7 @@ def main(argv: list[str]) -> None:
         print("guided transitions/s (jobs x transitions per second) and utilisation, one run:")
         throughput(ints("batches", "1,25,200"), ints("tokens", "11,21,51,101"), opts, reps=int(kw.get("reps", 3)),
                    device=kw.get("device", "cpu"), clock=kw.get("clock", "wall"), rounds=int(kw.get("rounds", 5)),
-                   echo=True)
+                   layers=int(kw.get("layers", 6)), echo=True)
         return
     if argv and argv[0] == "--precision":
         for a in argv[1:]:

@@ -120,7 +120,14 @@ def first_line(e: BaseException) -> str:
 UNPICKLE_WHY = "not a plain tensor state_dict (torch.load(weights_only=True) refused it: pickled code or objects?)"
 
 
-def torch_load_weights(path: Path, where: str, fix: str) -> Any:
+Fix = str | Callable[[], str]  # the fix an error names; a callable is built only when the error is raised
+
+
+def fix_text(fix: Fix) -> str:
+    return fix() if callable(fix) else fix
+
+
+def torch_load_weights(path: Path, where: str, fix: Fix) -> Any:
     """``torch.load(path, weights_only=True)``; anything that does not load is one CheckpointError.
 
     weights_only=True unpickles tensors and plain containers only, so a file carrying code
@@ -129,9 +136,9 @@ def torch_load_weights(path: Path, where: str, fix: str) -> Any:
     try:
         return torch.load(path, map_location="cpu", weights_only=True)
     except pickle.UnpicklingError as e:
-        raise CheckpointError(f"{where}: {path.name} is {UNPICKLE_WHY} ({first_line(e)}); {fix}") from None
+        raise CheckpointError(f"{where}: {path.name} is {UNPICKLE_WHY} ({first_line(e)}); {fix_text(fix)}") from None
     except Exception as e:  # noqa: BLE001 - truncated zip, bad magic, ...: a bad file either way
-        raise CheckpointError(f"{where}: {path.name} does not load ({first_line(e)}); {fix}") from None
+        raise CheckpointError(f"{where}: {path.name} does not load ({first_line(e)}); {fix_text(fix)}") from None
 
 
 def read_weights_manifest(ckpt_dir: Path, who: str, missing_fix: str, broken_fix: str) -> dict[str, Any]:
@@ -356,17 +363,17 @@ def verify_checkpoint(ckpt_dir: str | Path, cfg: Config, manifest: dict[str, Any
     ckpt_dir = Path(ckpt_dir)
     manifest = read_manifest(ckpt_dir, cfg) if manifest is None else manifest
     check_compatible(manifest, cfg, ckpt_dir)
-    _verified_sha(ckpt_dir, manifest, f"checkpoint {ckpt_dir}", _train_fix(cfg, ckpt_dir, broken=True))
+    _verified_sha(ckpt_dir, manifest, f"checkpoint {ckpt_dir}", lambda: _train_fix(cfg, ckpt_dir, broken=True))
     return manifest
 
 
-def _verified_sha(ckpt_dir: Path, manifest: dict[str, Any], where: str, fix: str) -> str:
+def _verified_sha(ckpt_dir: Path, manifest: dict[str, Any], where: str, fix: Fix) -> str:
     """sha256 of ``model.pt``, or one CheckpointError if the manifest records another."""
     sha = sha256_file(ckpt_dir / MODEL_FILE)
     if sha != manifest.get("model_sha256"):
         raise CheckpointError(
             f"{where}: {MODEL_FILE} has sha256 {sha[:16]}... but manifest.json records "
-            f"{str(manifest.get('model_sha256'))[:16]}... (corrupt or overwritten); {fix}"
+            f"{str(manifest.get('model_sha256'))[:16]}... (corrupt or overwritten); {fix_text(fix)}"
         )
     return sha
 
@@ -383,14 +390,15 @@ def load_checkpoint(ckpt_dir: str | Path, cfg: Config | None = None,
     manifest = read_manifest(ckpt_dir, cfg)
     if cfg is not None:  # before the sha: a checkpoint of another shape is named as such, corrupt or not
         check_compatible(manifest, cfg, ckpt_dir)
-    sha = _verified_sha(ckpt_dir, manifest, f"checkpoint {ckpt_dir}", _train_fix(cfg, ckpt_dir, broken=True))
+    sha = _verified_sha(ckpt_dir, manifest, f"checkpoint {ckpt_dir}", lambda: _train_fix(cfg, ckpt_dir, broken=True))
     if expect_digest is not None and expect_digest not in (manifest["digest"], sha):
         raise CheckpointError(
             f"checkpoint {ckpt_dir}: digest {manifest['digest']} differs from the expected {expect_digest}; "
             "the checkpoint changed since the run started; point checkpoint= at the original one"
         )
     model = model_from_manifest(manifest)
-    state = torch_load_weights(ckpt_dir / MODEL_FILE, f"checkpoint {ckpt_dir}", _train_fix(cfg, ckpt_dir, broken=True))
+    state = torch_load_weights(ckpt_dir / MODEL_FILE, f"checkpoint {ckpt_dir}",
+                               lambda: _train_fix(cfg, ckpt_dir, broken=True))
     try:
         model.load_state_dict(state, strict=True)
     except Exception as e:  # noqa: BLE001 - a state_dict of another shape (or not a state_dict) is a bad checkpoint
