@@ -37,3 +37,9 @@ def sha256_file(path: Path) -> str:
         for block in iter(lambda: f.read(1 << 20), b""):
             h.update(block)
     return h.hexdigest()
+
+
+def split_lines(manifest: dict[str, Any]) -> list[str]:
+    """One line per split of a dataset manifest (episodes x steps, sha256): how every data ``describe`` begins."""
+    return [f"  {split}: {manifest['episodes'][split]} episodes x {manifest['episode_steps']} steps  sha256={digest}"
+            for split, digest in manifest["sha256"].items()]

@@ -42,7 +42,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from fmctd_dist.config import Config, resolve_path
-from fmctd_dist.data.manifest_io import read_manifest_json, sha256_file
+from fmctd_dist.data.manifest_io import read_manifest_json, sha256_file, split_lines
 from fmctd_dist.data.npz import save_npz
 from fmctd_dist.data.splits import SPLITS, val_episodes
 from fmctd_dist.tokens import Normaliser
@@ -335,8 +335,7 @@ __all__ = ["make_cube_dataset", "load_cube_dataset", "load_cube_manifest", "Cube
 
 def describe(manifest: dict[str, Any]) -> list[str]:
     """What ``jobs/make_dataset.py`` prints about a cube play dataset."""
-    lines = [f"  {split}: {manifest['episodes'][split]} episodes x {manifest['episode_steps']} steps  sha256={digest}"
-             for split, digest in manifest["sha256"].items()]
+    lines = split_lines(manifest)
     lines.append(f"  {manifest['fraction_of_ogbench']:.0%} of OGBench's {manifest['ogbench_episodes']['train']} "
                  f"episodes; cube xyz mean {[round(x, 3) for x in manifest['state_mean']]}  "
                  f"std {[round(x, 3) for x in manifest['state_std']]}")

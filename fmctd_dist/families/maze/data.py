@@ -27,7 +27,7 @@ import numpy as np
 
 from fmctd_dist.config import Config, is_ant, resolve_path
 from fmctd_dist.families.maze.ant_data import ANT_GENERATOR_VERSION, AntSource, check_expert_matches
-from fmctd_dist.data.manifest_io import read_manifest_json, sha256_file
+from fmctd_dist.data.manifest_io import read_manifest_json, sha256_file, split_lines
 from fmctd_dist.data.npz import load_npz, save_npz
 from fmctd_dist.families.maze.point_data import POINT_GENERATOR_VERSION, PointSource
 from fmctd_dist.data.splits import SPLITS, val_episodes
@@ -246,8 +246,7 @@ def load_dataset(cfg: Config, path: Path | None = None) -> NavigateDataset:
 
 def describe(manifest: dict[str, Any]) -> list[str]:
     """What ``jobs/make_dataset.py`` prints about a navigate dataset: digests, normalisation, the ant data's stats."""
-    lines = [f"  {split}: {manifest['episodes'][split]} episodes x {manifest['episode_steps']} steps  sha256={digest}"
-             for split, digest in manifest["sha256"].items()]
+    lines = split_lines(manifest)
     lines.append(f"  x, y mean {manifest['obs_mean']}  std {manifest['obs_std']}")
     if "expert" in manifest:
         expert = manifest["expert"]
