@@ -37,13 +37,21 @@ class Prepared:
     policy_digest: str = ""  # the robot's low-level policy (ant, arm); "" when it has none (PD)
 
 
-def prepare(cfg: Config) -> Prepared:
+def check_inputs(cfg: Config) -> tuple[str, str, dict[str, Any]]:
+    """Everything a job reads, checked: (the low-level policy's digest, the device, the planner's manifest).
+
+    What :func:`prepare` checks, without the provenance it adds; ``evaluation.job_upload`` watches these
+    checks to learn which checkpoints a job reads."""
     policy = hooks_for(cfg.env.name).check_episodes(cfg)  # e.g. the ant's or the arm's policy exists and fits
     device = str(resolve_device(cfg.device))
     check_compile(cfg.diffusion.compile, device)  # a compiled denoiser's toolchain is there
-    ckpt = cfg.checkpoint_dir()
-    manifest = verify_checkpoint(ckpt, cfg)  # exists, well-typed, agrees with env/jump/model/n_tokens, sha256
-    return Prepared(cfg, ckpt, manifest["digest"], device, config_hash(cfg), git_sha(), policy)
+    manifest = verify_checkpoint(cfg.checkpoint_dir(), cfg)  # exists, well-typed, agrees with the config, sha256
+    return policy, device, manifest
+
+
+def prepare(cfg: Config) -> Prepared:
+    policy, device, manifest = check_inputs(cfg)
+    return Prepared(cfg, cfg.checkpoint_dir(), manifest["digest"], device, config_hash(cfg), git_sha(), policy)
 
 
 def same_policy(p: Prepared, episodes: Any) -> None:

@@ -2,7 +2,7 @@
 
 Ray refuses a working directory over 100 MiB, and the repository ships far more weights than one job
 reads. The checkpoints a job reads are found by running the job's own up-front checks
-(:func:`fmctd_dist.evaluation.grid.prepare`: the planner, the robot's policy, the visual parts, each
+(:func:`fmctd_dist.evaluation.grid.check_inputs`: the planner, the robot's policy, the visual parts, each
 manifest and sha256) and recording, with an audit hook, which checkpoint folders they open. So the
 upload follows the job's inputs for every env family without a list kept by hand, and a config whose
 inputs are broken fails here, with the job's own error, before anything is uploaded.
@@ -34,14 +34,14 @@ _hooked = False
 def checkpoints_read(cfg: Config) -> list[str]:
     """The checkpoint folders (``checkpoints/<name>``, sorted) that the eval job's checks open for ``cfg``."""
     global _opened, _hooked
-    from fmctd_dist.evaluation.grid import prepare
+    from fmctd_dist.evaluation.grid import check_inputs
 
     if not _hooked:
         sys.addaudithook(_record_open)
         _hooked = True
     _opened = []
     try:
-        prepare(cfg)
+        check_inputs(cfg)
         opened = list(_opened)
     finally:
         _opened = None
