@@ -44,9 +44,6 @@ PURPOSES: dict[str, str] = {
                                      "the large maze's boundary-loss latent lineage from it (val 0.0302 against the "
                                      "default `visual-pointmaze-large-h5`'s 0.0457; no shipped latent model descends "
                                      "from it); tests/test_gpu_train.py",
-    "cube-double-h5-bl": "docs/results.md (the robot table): the candidate to replace `cube-double-h5`, the shipped "
-                         "sparse model continued with the boundary loss (warp-free plans 70% -> 97%); it becomes the "
-                         "default once its Fast-MCTD-Replan grid is complete (issue 56)",
 }
 
 FAMILY_ORDER = ("pointmaze", "antmaze", "cube", "visual-pointmaze")

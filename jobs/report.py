@@ -73,10 +73,12 @@ def shipped_digest(cfg: Config) -> str:
     return json.loads(path.read_text()).get("digest", "") if path.exists() else ""
 
 
-def shipped_digests(envs: list[str], methods: list[str]) -> dict[tuple[str, str], str]:
-    """Per (method, env): the digest of its default checkpoint today, so a table line on weights that were
-    replaced since (same path, so same config hash) is marked "older weights" instead of passing for today's."""
-    return {(m, e): shipped_digest(load_config([f"env={e}", f"method={m}"])) for e in envs for m in methods}
+def today(envs: list[str], methods: list[str]) -> tuple[dict[tuple[str, str], str], dict[tuple[str, str], str]]:
+    """Per (method, env): the hash of today's default config, and the digest of its default checkpoint today
+    (so a table line on weights that were replaced since, same path and so same config hash, is marked "older
+    weights" instead of passing for today's)."""
+    cfgs = {(m, e): load_config([f"env={e}", f"method={m}"]) for e in envs for m in methods}
+    return {k: config_hash(c) for k, c in cfgs.items()}, {k: shipped_digest(c) for k, c in cfgs.items()}
 
 
 def main(argv: list[str]) -> int:
@@ -100,7 +102,7 @@ def main(argv: list[str]) -> int:
 
     main_rows = merge_rows(committed, fresh, "main")
     all_rows += main_rows
-    maze_shipped = shipped_digests(ENV_ORDER + ANT_ENV_ORDER, METHOD_ORDER)  # the maze, AntMaze and glance tables'
+    maze_hashes, maze_shipped = today(ENV_ORDER + ANT_ENV_ORDER, METHOD_ORDER)  # the maze, AntMaze and glance tables'
     point_rows = [r for r in main_rows if r["env"] in ENV_ORDER]
     if point_rows:
         sections["maze"] = maze_table(point_rows, shipped=maze_shipped)
@@ -130,11 +132,10 @@ def main(argv: list[str]) -> int:
     archived_rows = [archived[k] for k in sorted(archived)]
     all_rows += archived_rows
 
-    # the robot table: every archived cube episode made with today's default config of its method and env
-    defaults = {(m, e): load_config([f"env={e}", f"method={m}"]) for e in CUBE_ENV_ORDER for m in CUBE_METHOD_ORDER}
-    hashes = {k: config_hash(c) for k, c in defaults.items()}
-    shipped = {k: shipped_digest(c) for k, c in defaults.items()}
-    robot, dropped = current_rows(archived_rows, hashes)
+    # the robot table: every cube episode (archived runs and run main, where jobs/paper_tables.sh writes) made with
+    # today's default config of its method and env
+    hashes, shipped = today(CUBE_ENV_ORDER, CUBE_METHOD_ORDER)
+    robot, dropped = current_rows(archived_rows + [r for r in main_rows if r["env"] in CUBE_ENV_ORDER], hashes)
     if robot:
         sections["robot"] = maze_table(robot, CUBE_ENV_ORDER, CUBE_METHOD_ORDER, dropped, shipped)
 
@@ -152,7 +153,10 @@ def main(argv: list[str]) -> int:
     if "<!-- report:glance -->" in text:
         columns = {**{e: METHOD_ORDER for e in ENV_ORDER + ANT_ENV_ORDER},
                    **{e: CUBE_METHOD_ORDER for e in CUBE_ENV_ORDER}}
-        sections["glance"] = glance_table(main_rows + robot, columns, {**maze_shipped, **shipped})
+        # only the rows made with today's default config of their (method, env), like the robot table's
+        maze_now = current_rows([r for r in main_rows if r["env"] in ENV_ORDER + ANT_ENV_ORDER], maze_hashes)[0]
+        elsewhere = {(r["method"], r["env"]) for r in main_rows + archived_rows}
+        sections["glance"] = glance_table(maze_now + robot, columns, {**maze_shipped, **shipped}, elsewhere)
     text = fill_markers(text, sections)
     doc.write_text(text)
     if all_rows:

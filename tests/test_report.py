@@ -232,7 +232,8 @@ def test_ablation_lines_on_weights_no_longer_shipped_say_so():
 
 def test_glance_table_shows_todays_largest_line_per_cell_beside_the_paper():
     """One cell per (method, env): the line on today's weights with the most episodes, a count when under 50,
-    a dagger when every line is on replaced weights, '–' for what was not run; each column its own methods."""
+    a dagger when every line is on replaced weights, '‡' for what ran only at other settings, '–' for what was
+    not run; each column its own methods."""
     def r(task, seed, ok, method, env, digest):
         return {**row(task, seed, ok, method=method, env=env), "config_hash": "c" * 16, "checkpoint_digest": digest,
                 "episode_time_limit": 0.0}
@@ -245,11 +246,11 @@ def test_glance_table_shows_todays_largest_line_per_cell_beside_the_paper():
     shipped = {("fast-mctd", "pointmaze-giant"): "new", ("s-mctd", "pointmaze-giant"): "new",
                ("fast-mctd-replan", "cube-single"): "new"}
     maze, cube = ["mctd", "s-mctd", "fast-mctd"], ["mctd-replan", "s-mctd-replan", "fast-mctd-replan"]
-    table = glance_table(rows, {"pointmaze-giant": maze, "cube-single": cube}, shipped)
+    table = glance_table(rows, {"pointmaze-giant": maze, "cube-single": cube}, shipped, {("mctd", "pointmaze-giant")})
     assert table.splitlines()[0] == "| method | point giant | cube single |"
     assert "| fast-mctd / fast-mctd-replan | 92 / 100 | 100 (1) / 100 |" in table
     assert "| s-mctd / s-mctd-replan | 100 (4) † / 100 | – / 100 |" in table
-    assert "| mctd / mctd-replan | – / 100 | – / 100 |" in table
+    assert "| mctd / mctd-replan | ‡ / 100 | – / 100 |" in table  # run, but only at settings other than today's
 
 
 def test_visual_table_prints_each_lines_settings_and_never_averages_two_configs():

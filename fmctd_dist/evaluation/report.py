@@ -209,14 +209,17 @@ def _glance_line(lines: list[dict[str, Any]], shipped: str | None) -> tuple[dict
 
 
 def glance_table(rows: list[dict[str, Any]], columns: dict[str, list[str]],
-                 shipped: dict[tuple[str, str], str] | None = None) -> str:
+                 shipped: dict[tuple[str, str], str] | None = None,
+                 elsewhere: set[tuple[str, str]] | None = None) -> str:
     """One cell per (method, env): our success % against the paper's, e.g. ``84 / 100``, from the same
-    lines as the full tables (:func:`maze_table`). ``columns``: env -> its methods in row order (the
-    maze table's for a maze, the robot table's replanning ones for a cube env), so row i holds each
-    env's i-th method and is named by them. A (method, env) with several lines shows the one on today's
-    weights with the most episodes; ``†`` marks a cell whose lines are all on replaced weights,
-    ``(n)`` a line of fewer than 50 episodes. For reading at a glance only: the full tables say
-    which config, seeds and planning times each number has."""
+    lines as the full tables (:func:`maze_table`). ``rows``: those made with today's default config of
+    their (method, env) (:func:`current_rows`), so a cell is what today's defaults give. ``columns``: env
+    -> its methods in row order (the maze table's for a maze, the robot table's replanning ones for a cube
+    env), so row i holds each env's i-th method and is named by them. A (method, env) with several lines
+    shows the one on today's weights with the most episodes; ``†`` marks a cell whose lines are all on
+    replaced weights, ``(n)`` a line of fewer than 50 episodes, ``‡`` a (method, env) in ``elsewhere``:
+    run only at other settings. For reading at a glance only: the full tables say which config, seeds and
+    planning times each number has."""
     key = _lines(rows)
     envs = list(columns)
     short = [e.replace("pointmaze-", "point ").replace("antmaze-", "ant ").replace("cube-", "cube ") for e in envs]
@@ -227,7 +230,7 @@ def glance_table(rows: list[dict[str, Any]], columns: dict[str, list[str]],
             m = methods[i] if i < len(methods) else ""
             paper = paper_cell(m, env).split(" ", 1)[0]
             if (m, env) not in key:
-                cells.append(f"– / {paper}")
+                cells.append(f"{'‡' if (m, env) in (elsewhere or set()) else '–'} / {paper}")
                 continue
             s, today = _glance_line(key[(m, env)], (shipped or {}).get((m, env)))
             few = f" ({s['episodes']})" if s["episodes"] < 50 else ""
