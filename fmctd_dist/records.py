@@ -6,6 +6,7 @@ name without an import cycle.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 
@@ -21,6 +22,29 @@ class EnvSpec:
     env_fields: tuple[str, ...] = ()  # the env config fields only some envs read, that this one reads
 
 
+# (success %, its std, planning time s, its std) as the paper prints them; None where it gives no std
+PaperCell = tuple[float, "float | None", float, "float | None"]
+
+
+def keyed_by_env(paper: Mapping[str, Mapping[str, PaperCell]], kind: str) -> dict[str, dict[str, PaperCell]]:
+    """A paper table keyed method -> size (``medium``) re-keyed method -> env name (``pointmaze-medium``)."""
+    return {m: {f"{kind}-{size}": cell for size, cell in row.items()} for m, row in paper.items()}
+
+
+@dataclass(frozen=True)
+class Table:
+    """One of the paper's result tables a family reproduces: envs and methods in the paper's order, the
+    paper's numbers, and how the report shows it."""
+
+    name: str  # its block in docs/results.md (``<!-- report:<name> -->``)
+    envs: tuple[str, ...]
+    methods: tuple[str, ...]
+    paper: Mapping[str, Mapping[str, PaperCell]]  # method -> env -> the paper's cell
+    glance: bool = True  # a column per env in the glance table at the top of the results and the README
+    columns: tuple[str, ...] = ()  # the glance table's short header per env ("point medium"); () = the env names
+    render: str = ""  # "module:function(rows) -> markdown" of a table with its own layout; "" = the standard one
+
+
 @dataclass(frozen=True)
 class Family:
     """What a family brings. Modules are named, not imported: the record stays light."""
@@ -31,3 +55,4 @@ class Family:
     data: str  # module with make(cfg, progress) -> (dir, manifest), load(cfg) -> dataset, describe(manifest)
     configs: str = ""  # folder holding env/<name>.yaml for its envs; "" = the repository's configs/
     hint: str = ""  # what to run for this family, named when a job built for others refuses one of its envs
+    tables: tuple[Table, ...] = ()  # the paper's tables it reproduces, in the paper's order

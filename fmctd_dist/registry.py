@@ -20,7 +20,7 @@ from functools import cache
 from pathlib import Path
 
 from fmctd_dist.errors import ConfigError, unknown_name
-from fmctd_dist.records import EnvSpec, Family  # noqa: F401 - re-exported for the record modules' readers
+from fmctd_dist.records import EnvSpec, Family, Table  # noqa: F401 - re-exported for the record modules' readers
 
 # family name -> the module holding its record
 FAMILIES: dict[str, str] = {
@@ -45,6 +45,11 @@ def records() -> dict[str, Family]:
 @cache
 def env_specs() -> dict[str, EnvSpec]:
     return {e.name: e for rec in records().values() for e in rec.envs}
+
+
+def tables() -> dict[str, Table]:
+    """Every paper table the registered families reproduce, by name, in registry order."""
+    return {t.name: t for rec in records().values() for t in rec.tables}
 
 
 def env_names() -> tuple[str, ...]:

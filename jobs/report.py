@@ -28,6 +28,7 @@ alone with ``--checkpoints``; tests/test_checkpoint_index.py holds the committed
 
 from __future__ import annotations
 
+import importlib
 import json
 from pathlib import Path
 
@@ -37,16 +38,13 @@ import pyarrow.parquet as pq
 from fmctd_dist.checkpoint_index import write_index
 from fmctd_dist.cli import run
 from fmctd_dist.config import REPO_ROOT, Config, load_config, resolve_path
-from fmctd_dist.families.maze.geometry import maze_geometry
 from fmctd_dist.evaluation.identity import config_hash
 from fmctd_dist.evaluation.plots import plot_ablation, plot_success_vs_time
-from fmctd_dist.families.maze.plots import plot_episode
-from fmctd_dist.evaluation.report import ABLATIONS, ANT_ENV_ORDER, CUBE_ENV_ORDER, CUBE_METHOD_ORDER, ENV_ORDER, \
-    METHOD_ORDER, ablation_summary, ablation_table, current_rows, fill_markers, glance_table, load_rows, \
-    maze_table, merge_rows, row_key, superseded
+from fmctd_dist.evaluation.report import ABLATIONS, ablation_summary, ablation_table, current_rows, fill_markers, \
+    glance_table, load_rows, merge_rows, paper_table, row_key, superseded
+from fmctd_dist.family import hooks_for
+from fmctd_dist.registry import tables
 from fmctd_dist.evaluation.results import markdown_table, summarise
-from fmctd_dist.families.visual.record import VISUAL_ENVS
-from fmctd_dist.families.visual.table import visual_table
 from fmctd_dist.errors import ConfigError
 
 
@@ -102,20 +100,6 @@ def main(argv: list[str]) -> int:
 
     main_rows = merge_rows(committed, fresh, "main")
     all_rows += main_rows
-    maze_hashes, maze_shipped = today(ENV_ORDER + ANT_ENV_ORDER, METHOD_ORDER)  # the maze, AntMaze and glance tables'
-    point_rows = [r for r in main_rows if r["env"] in ENV_ORDER]
-    if point_rows:
-        sections["maze"] = maze_table(point_rows, shipped=maze_shipped)
-        if any(r["env"] in ANT_ENV_ORDER for r in main_rows):
-            sections["antmaze"] = maze_table(main_rows, ANT_ENV_ORDER, shipped=maze_shipped)
-        plot_success_vs_time(summarise(point_rows), figures / "success_vs_time.png")
-        for env in ENV_ORDER + ANT_ENV_ORDER:  # one Fast-MCTD plan per maze, drawn with what the controller executed
-            # committed rows carry no trajectories: a maze without fresh rows keeps its figure
-            rs = sorted((r for r in main_rows if r["method"] == "fast-mctd" and r["env"] == env and "plan_xy" in r),
-                        key=lambda r: (not r["success"], r["task"], r["seed"]))
-            if rs:
-                plot_episode(rs[0], maze_geometry(env), figures / f"plan_{env}.png")
-
     every_shipped = {json.loads(m.read_text()).get("digest")
                      for m in (REPO_ROOT / "checkpoints").glob("*/manifest.json")}
     for ab in ABLATIONS:
@@ -132,31 +116,43 @@ def main(argv: list[str]) -> int:
     archived_rows = [archived[k] for k in sorted(archived)]
     all_rows += archived_rows
 
-    # the robot table: every cube episode (archived runs and run main, where jobs/paper_tables.sh writes) made with
-    # today's default config of its method and env
-    hashes, shipped = today(CUBE_ENV_ORDER, CUBE_METHOD_ORDER)
-    robot, dropped = current_rows(archived_rows + [r for r in main_rows if r["env"] in CUBE_ENV_ORDER], hashes)
-    if robot:
-        sections["robot"] = maze_table(robot, CUBE_ENV_ORDER, CUBE_METHOD_ORDER, dropped, shipped)
-
+    # the paper's tables, one per family table (registry records): every episode of run main (where eval.py and
+    # jobs/paper_tables.sh write) and of the archived runs made with today's default config of its method and env
     text = doc.read_text()
-    # the visual maze table: the lines section 13 chose, each from its own run, settings and weights printed
-    if "<!-- report:visual -->" in text:
-        sections["visual"] = visual_table(archived_rows)
+    now: list[dict] = []
+    elsewhere = {(r["method"], r["env"]) for r in main_rows + archived_rows}
+    shipped: dict[tuple[str, str], str] = {}
+    for table in tables().values():
+        if f"<!-- report:{table.name} -->" not in text:
+            continue
+        if table.render:  # a table with its own layout (the visual maze: each line's model and settings)
+            module, _, fn = table.render.partition(":")
+            sections[table.name] = getattr(importlib.import_module(module), fn)(archived_rows)
+            continue
+        hashes, digests = today(list(table.envs), list(table.methods))
+        shipped |= digests
+        rows, dropped = current_rows([r for r in main_rows + archived_rows if r["env"] in table.envs], hashes)
+        if rows:
+            now += rows if table.glance else []
+            sections[table.name] = paper_table(rows, table, dropped, digests)
+        for env in table.envs:  # one plan per env of the table's last method, drawn with what the robot executed
+            # committed rows carry no trajectories: an env without fresh rows keeps its figure
+            rs = sorted((r for r in main_rows if r["method"] == table.methods[-1] and r["env"] == env
+                         and "plan_xy" in r), key=lambda r: (not r["success"], r["task"], r["seed"]))
+            if rs:
+                hooks_for(env).plot_episode(rs[0], figures / f"plan_{env}.png")
+    if "maze" in sections:
+        plot_success_vs_time(summarise([r for r in now if r["env"] in tables()["maze"].envs]),
+                             figures / "success_vs_time.png")
 
     # any other family's rows of run main (a family added after the paper's): the table jobs/eval.py prints
-    paper_envs = set(ENV_ORDER + ANT_ENV_ORDER + CUBE_ENV_ORDER + list(VISUAL_ENVS))
+    paper_envs = {e for t in tables().values() for e in t.envs}
     if "<!-- report:families -->" in text:
         sections["families"] = markdown_table(summarise([r for r in main_rows if r["env"] not in paper_envs]))
 
-    # the at-a-glance block at the top of the doc: the maze and robot lines above, one success cell each
+    # the at-a-glance block at the top of the doc: the tables above, one success cell each
     if "<!-- report:glance -->" in text:
-        columns = {**{e: METHOD_ORDER for e in ENV_ORDER + ANT_ENV_ORDER},
-                   **{e: CUBE_METHOD_ORDER for e in CUBE_ENV_ORDER}}
-        # only the rows made with today's default config of their (method, env), like the robot table's
-        maze_now = current_rows([r for r in main_rows if r["env"] in ENV_ORDER + ANT_ENV_ORDER], maze_hashes)[0]
-        elsewhere = {(r["method"], r["env"]) for r in main_rows + archived_rows}
-        sections["glance"] = glance_table(maze_now + robot, columns, {**maze_shipped, **shipped}, elsewhere)
+        sections["glance"] = glance_table(now, [t for t in tables().values() if t.glance], shipped, elsewhere)
     text = fill_markers(text, sections)
     doc.write_text(text)
     if all_rows:

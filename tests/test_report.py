@@ -2,8 +2,10 @@
 
 import pytest
 
-from fmctd_dist.evaluation.report import ABLATIONS, ANT_ENV_ORDER, CUBE_ENV_ORDER, CUBE_METHOD_ORDER, \
-    ablation_summary, ablation_table, current_rows, fill_markers, glance_table, load_rows, maze_table, merge_rows
+from fmctd_dist.records import Table
+from fmctd_dist.registry import tables
+from fmctd_dist.evaluation.report import ABLATIONS, \
+    ablation_summary, ablation_table, current_rows, fill_markers, glance_table, load_rows, paper_table, merge_rows
 from fmctd_dist.evaluation.results import ResultStore
 
 
@@ -36,8 +38,8 @@ def test_ablation_groups_by_the_recorded_knob_not_the_run_name():
     assert "| 200 | fast-mctd / giant | 4 (2 x 2) | 50 ± 0 | 200.00 ± 0.00 | 1.00x |" in table
 
 
-def test_maze_table_lists_every_method_and_marks_what_was_not_run():
-    table = maze_table([row(k, s, True, env="pointmaze-medium") for k in (1, 2) for s in (0, 1)])
+def test_paper_table_lists_every_method_and_marks_what_was_not_run():
+    table = paper_table([row(k, s, True, env="pointmaze-medium") for k in (1, 2) for s in (0, 1)], tables()["maze"])
     assert "| fast-mctd | pointmaze-medium | 4 (2 x 2) | 100 ± 0 |" in table
     assert "| mctd | pointmaze-giant | not run |" in table and "100 ± 0 / 264.2 ± 33.8 s" in table
     assert "50.0% / 99.0%" in table
@@ -76,7 +78,7 @@ def test_ablation_compares_settings_within_a_maze_not_across():
 
 def test_antmaze_rows_get_their_own_table_with_the_papers_antmaze_numbers():
     rows = [row(k, 0, k < 3, env="antmaze-medium") for k in (1, 2, 3, 4, 5)]
-    table = maze_table(rows, ANT_ENV_ORDER)
+    table = paper_table(rows, tables()["antmaze"])
     assert "| fast-mctd | antmaze-medium | 5 (5 x 1) | 40 ± 0 |" in table
     assert "98 ± 6 / 2.2 ± 0.1 s" in table  # the paper's AntMaze Fast-MCTD, not its PointMaze 100 ± 0 / 3.6 s
     assert "| mctd | antmaze-giant | not run | | | | | 94 ± 9 / 214.5 ± 11.0 s |" in table
@@ -131,7 +133,7 @@ def test_robot_table_takes_each_episode_of_todays_default_config_once():
     cur, dropped = current_rows(rows, hashes)
     assert len(cur) == 8 and {r["run"] for r in cur} == {"grid-s12"}  # duplicates from the larger run
     assert {r["seed"] for r in cur} == {0, 1, 2, 3}  # a seed counts only with every task
-    table = maze_table(cur, CUBE_ENV_ORDER, CUBE_METHOD_ORDER, dropped)
+    table = paper_table(cur, tables()["robot"], dropped)
     assert ("| fast-mctd-replan | cube-double | 8 (2 x 4; 2 more of unfinished seeds not counted) | 100 ± 0 | "
             "2.00 ± 0.00 |") in table
     assert "77 ± 11 / 5.9 ± 1.7 s" in table  # the paper's cell beside ours
@@ -140,7 +142,8 @@ def test_robot_table_takes_each_episode_of_todays_default_config_once():
 
 def test_robot_table_marks_lines_on_weights_that_are_no_longer_shipped():
     """A config names its checkpoint by path: rows made before the weights there were replaced keep the
-    config hash, and only their digest tells them apart. Such a line says so; lines on today's weights do not."""
+    config hash, and only their digest tells them apart. Such a line says so, and shows only where no line is on
+    today's weights; lines on today's weights do not."""
     def cube(task, seed, digest, method):
         return {**row(task, seed, True, method=method, env="cube-triple"), "run": "grid", "config_hash": "now",
                 "checkpoint_digest": digest, "episode_time_limit": 0.0}
@@ -151,11 +154,12 @@ def test_robot_table_marks_lines_on_weights_that_are_no_longer_shipped():
             + [cube(k, s, d * 16, "fast-mctd-replan") for d in "ab" for k in (1, 2) for s in (0, 1)])
     cur, dropped = current_rows(rows, hashes)
     shipped = {(m, "cube-triple"): "b" * 16 for m in methods}
-    table = maze_table(cur, CUBE_ENV_ORDER, CUBE_METHOD_ORDER, dropped, shipped)
+    table = paper_table(cur, tables()["robot"], dropped, shipped)
     assert "| s-mctd-replan (older weights oldoldol; shipped: bbbbbbbb) | cube-triple | 4 (2 x 2) |" in table
-    assert "| fast-mctd-replan [config now, ckpt aaaaaaaa] (older weights; shipped: bbbbbbbb) |" in table
-    assert "| fast-mctd-replan [config now, ckpt bbbbbbbb] | cube-triple |" in table
-    assert maze_table(cur, CUBE_ENV_ORDER, CUBE_METHOD_ORDER, dropped).count("older weights") == 0  # none known
+    # a line on today's weights hides the same config's lines on replaced ones (they stay in the rows)
+    assert "| fast-mctd-replan | cube-triple | 4 (2 x 2) |" in table and "aaaaaaaa" not in table
+    unknown = paper_table(cur, tables()["robot"], dropped)  # nothing known of what is shipped: every line
+    assert unknown.count("older weights") == 0 and "| fast-mctd-replan [config now, ckpt aaaaaaaa] |" in unknown
 
 
 def run_report(tmp_path, doc_text: str):
@@ -194,16 +198,19 @@ def test_report_marks_maze_lines_whose_weights_were_replaced(tmp_path):
     that were replaced at the same path says "older weights"; a line on today's weights does not."""
     import json
 
-    from fmctd_dist.config import REPO_ROOT
+    from fmctd_dist.config import REPO_ROOT, load_config
+    from fmctd_dist.evaluation.identity import config_hash
 
     today = json.loads((REPO_ROOT / "checkpoints/pointmaze-medium-h5/manifest.json").read_text())["digest"]
-    for digest, method in ((today, "fast-mctd"), ("0" * 16, "s-mctd")):
+    for digest, method, seed in ((today, "fast-mctd", 0), ("0" * 16, "s-mctd", 0), (today, "fast-mctd", 1)):
+        default = config_hash(load_config(["env=pointmaze-medium", f"method={method}"]))
         for k in (1, 2):
             ResultStore(tmp_path / "res", "main").write(
-                {**row(k, 0, True, method=method, env="pointmaze-medium"), "config_hash": "h" * 16,
+                {**row(k, seed, True, method=method, env="pointmaze-medium"),
+                 "config_hash": default if seed == 0 else "h" * 16,  # seed 1: made at other settings
                  "checkpoint_digest": digest, "episode_time_limit": 0.0})
     text = run_report(tmp_path, "# Results\n<!-- report:maze -->\n<!-- /report:maze -->\n").read_text()
-    assert "| fast-mctd | pointmaze-medium | 2 (2 x 1) |" in text
+    assert "| fast-mctd | pointmaze-medium | 2 (2 x 1) |" in text  # the tables hold today's default config only
     assert f"| s-mctd (older weights 00000000; shipped: {today[:8]}) | pointmaze-medium | 2 (2 x 1) |" in text
 
 
@@ -246,7 +253,9 @@ def test_glance_table_shows_todays_largest_line_per_cell_beside_the_paper():
     shipped = {("fast-mctd", "pointmaze-giant"): "new", ("s-mctd", "pointmaze-giant"): "new",
                ("fast-mctd-replan", "cube-single"): "new"}
     maze, cube = ["mctd", "s-mctd", "fast-mctd"], ["mctd-replan", "s-mctd-replan", "fast-mctd-replan"]
-    table = glance_table(rows, {"pointmaze-giant": maze, "cube-single": cube}, shipped, {("mctd", "pointmaze-giant")})
+    point = Table("maze", ("pointmaze-giant",), maze, {}, columns=("point giant",))
+    arm = Table("robot", ("cube-single",), cube, {}, columns=("cube single",))
+    table = glance_table(rows, [point, arm], shipped, {("mctd", "pointmaze-giant")})
     assert table.splitlines()[0] == "| method | point giant | cube single |"
     assert "| fast-mctd / fast-mctd-replan | 92 / 100 | 100 (1) / 100 |" in table
     assert "| s-mctd / s-mctd-replan | 100 (4) † / 100 | – / 100 |" in table

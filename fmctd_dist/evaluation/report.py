@@ -19,19 +19,11 @@ from typing import Any
 import numpy as np
 import pyarrow.parquet as pq
 
-from fmctd_dist.registry import env_names, family
+from fmctd_dist.records import Table
+from fmctd_dist.registry import env_names
 from fmctd_dist.evaluation.paper import paper_cell
 from fmctd_dist.evaluation.identity import row_identity
 from fmctd_dist.evaluation.results import label, summarise
-
-METHOD_ORDER = ["diffuser", "diffuser-replan", "diffusion-forcing", "mctd", "p-mctd", "s-mctd", "fast-mctd"]
-ENV_ORDER = [e for e in env_names() if family(e) == "pointmaze"]  # the paper's order: medium, large, giant
-ANT_ENV_ORDER = [e for e in env_names() if family(e) == "antmaze"]
-# the paper's robot table: replanning searches only, single / double / triple
-CUBE_METHOD_ORDER = ["diffuser", "diffuser-replan", "diffusion-forcing", "mctd-replan", "p-mctd-replan",
-                     "s-mctd-replan", "fast-mctd-replan"]
-CUBE_ENV_ORDER = [e for e in env_names() if e.startswith("cube-")]
-
 
 @dataclass(frozen=True)
 class Ablation:
@@ -170,20 +162,21 @@ def _method_cell(s: dict[str, Any], shipped: dict[tuple[str, str], str] | None) 
     return f"{label(s)} (older weights{which}; shipped: {now[:8]})"
 
 
-def maze_table(rows: list[dict[str, Any]], envs: list[str] = ENV_ORDER, methods: list[str] = METHOD_ORDER,
-               dropped: dict[tuple, int] | None = None, shipped: dict[tuple[str, str], str] | None = None) -> str:
-    """The paper's Table "Maze results" for ``envs``: one line per (method, env) in the paper's order
-    (``methods``; the robot table passes the cube envs and the replanning methods, ``dropped``
-    from :func:`current_rows`, said in the episodes cell, and ``shipped``: the digest of each
-    (method, env)'s default checkpoint today, so that a line on older weights is marked)."""
-    key = _lines(rows)
+def paper_table(rows: list[dict[str, Any]], table: Table, dropped: dict[tuple, int] | None = None,
+                shipped: dict[tuple[str, str], str] | None = None) -> str:
+    """One of the paper's tables (a family record's :class:`~fmctd_dist.records.Table`): one line per (method,
+    env) in the paper's order, ``dropped`` from :func:`current_rows`, said in the episodes cell, and
+    ``shipped``: the digest of each (method, env)'s default checkpoint today, so that a line on older weights is
+    marked. A (method, env) shows its lines on today's weights, else its largest on replaced ones."""
+    shown = {s["identity"] for (m, env), ls in _lines(rows).items() for s in _shown(ls, (shipped or {}).get((m, env)))}
+    key = _lines([r for r in rows if row_identity(r) in shown])  # a label names its config where shown lines differ
     # "in denoiser": share of planning time spent computing inside denoiser actors / inside denoiser calls
     # (the latter adds queueing behind other env actors and Ray transport; "–" for rows recorded before it existed)
     lines = ["| method | env | episodes (tasks x seeds) | success (%) | planning time (s) | "
              "in denoiser: compute / calls | success per task | paper: success / time (GPU) |",
              "|---|---|---|---|---|---|---|---|"]
-    for env in envs:
-        for m in methods:
+    for env in table.envs:
+        for m in table.methods:
             if (m, env) not in key:
                 lines.append(f"| {m} | {env} | not run | | | | | {paper_cell(m, env)} |")
             for s in key.get((m, env), []):  # one line per config/checkpoint: never averaged together
@@ -200,6 +193,16 @@ def maze_table(rows: list[dict[str, Any]], envs: list[str] = ENV_ORDER, methods:
     return "\n".join(lines)
 
 
+def _shown(lines: list[dict[str, Any]], shipped: str | None) -> list[dict[str, Any]]:
+    """A table's lines of one (method, env): those on today's weights (several only where the identity differs
+    in more than the weights), else its largest line on replaced weights, marked; all when nothing is known of
+    what is shipped. The replaced lines stay in the rows (docs/eval_rows.parquet) and the notebook."""
+    if not shipped:
+        return lines
+    today = [s for s in lines if str(s.get("checkpoint_digest")) == shipped]
+    return today or [max(lines, key=lambda s: s["episodes"])] if lines else []
+
+
 def _glance_line(lines: list[dict[str, Any]], shipped: str | None) -> tuple[dict[str, Any], bool]:
     """The line a cell shows: on today's weights if any is, then the one with the most episodes; and
     whether it is on today's weights."""
@@ -208,22 +211,22 @@ def _glance_line(lines: list[dict[str, Any]], shipped: str | None) -> tuple[dict
     return max(pool, key=lambda s: s["episodes"]), bool(today)
 
 
-def glance_table(rows: list[dict[str, Any]], columns: dict[str, list[str]],
+def glance_table(rows: list[dict[str, Any]], tables: list[Table],
                  shipped: dict[tuple[str, str], str] | None = None,
                  elsewhere: set[tuple[str, str]] | None = None) -> str:
     """One cell per (method, env): our success % against the paper's, e.g. ``84 / 100``, from the same
-    lines as the full tables (:func:`maze_table`). ``rows``: those made with today's default config of
-    their (method, env) (:func:`current_rows`), so a cell is what today's defaults give. ``columns``: env
-    -> its methods in row order (the maze table's for a maze, the robot table's replanning ones for a cube
-    env), so row i holds each env's i-th method and is named by them. A (method, env) with several lines
+    lines as the full tables (:func:`paper_table`). ``rows``: those made with today's default config of
+    their (method, env) (:func:`current_rows`), so a cell is what today's defaults give. One column per env
+    of ``tables``; row i holds each table's i-th method and is named by them (a maze's ``mctd``, a cube's
+    ``mctd-replan``). A (method, env) with several lines
     shows the one on today's weights with the most episodes; ``†`` marks a cell whose lines are all on
     replaced weights, ``(n)`` a line of fewer than 50 episodes, ``‡`` a (method, env) in ``elsewhere``:
     run only at other settings. For reading at a glance only: the full tables say which config, seeds and
     planning times each number has."""
     key = _lines(rows)
-    envs = list(columns)
-    short = [e.replace("pointmaze-", "point ").replace("antmaze-", "ant ").replace("cube-", "cube ") for e in envs]
-    lines = ["| method | " + " | ".join(short) + " |", "|---" * (len(envs) + 1) + "|"]
+    columns = {env: t.methods for t in tables for env in t.envs}
+    short = [name for t in tables for name in (t.columns or t.envs)]
+    lines = ["| method | " + " | ".join(short) + " |", "|---" * (len(columns) + 1) + "|"]
     for i in range(max(len(ms) for ms in columns.values())):
         cells = []
         for env, methods in columns.items():

@@ -21,10 +21,8 @@ from fmctd_dist.evaluation.identity import changed_fields, row_identity
 from fmctd_dist.evaluation.paper import paper_cell
 from fmctd_dist.evaluation.plan_tally import plan_statuses
 from fmctd_dist.evaluation.results import summarise
+from fmctd_dist.families.visual.record import VISUAL_ENVS, VISUAL_METHODS
 
-VISUAL_ENVS = ("visual-pointmaze-medium", "visual-pointmaze-large")
-VISUAL_METHODS = ("diffuser", "diffuser-replan", "diffusion-forcing", "mctd", "p-mctd", "s-mctd", "fast-mctd",
-                  "mctd-replan", "fast-mctd-replan")  # the paper's row order
 # config keys that say what a row is, not how it differs (the method and env name themselves)
 _NAMES = ("env.name", "method.name")
 
