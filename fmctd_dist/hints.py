@@ -14,7 +14,7 @@ import shlex
 from pathlib import Path
 from typing import Any
 
-from fmctd_dist.config import REPO_ROOT, Config
+from fmctd_dist.config import REPO_ROOT, Config, build, group_layers
 
 # Fields no training or dataset run reads (or that the hint sets itself).
 NOT_READ = {"env.protocol", "env.policy", "train.out", "train.threads", "model.kind"}
@@ -44,13 +44,7 @@ def shown(path: Path | str) -> str:
 
 def job_defaults(env: str, method: str) -> Config:
     """The config a job starts from (dataclass defaults <- env yaml <- method yaml), unvalidated."""
-    from omegaconf import OmegaConf
-
-    from fmctd_dist.config import _group_file, merge_checked
-
-    base = OmegaConf.structured(Config)
-    base = merge_checked(base, _group_file("env", env), "configs/env")
-    return OmegaConf.to_object(merge_checked(base, _group_file("method", method), "configs/method"))
+    return build(Config, [], lambda cfg: None, group_layers(env, method))
 
 
 def differing_words(cfg: Config, base: Config, sections: tuple[str, ...]) -> list[str]:

@@ -118,6 +118,13 @@ def job_path(name: str) -> Path:
     return found[0]
 
 
+def with_words(base: list[str], *extra: str) -> list[str]:
+    """``base`` with each ``extra`` word replacing base's word of the same key (config loaders refuse a key
+    given twice)."""
+    keys = {w.split("=", 1)[0] for w in extra}
+    return [w for w in base if w.split("=", 1)[0] not in keys] + list(extra)
+
+
 def load_job(name: str) -> ModuleType:
     """A script under jobs/ or one of its folders (not a package) imported as a module, so tests call its
     functions. Its folder goes on sys.path, as when Python runs it, so its imports of sibling scripts resolve."""

@@ -20,7 +20,7 @@ from fmctd_dist.families.maze.expert.train import train_expert
 from fmctd_dist.config import REPO_ROOT
 from fmctd_dist.diffusion.checkpoint import load_train_state
 from fmctd_dist.errors import CheckpointError, ConfigError
-from conftest import torch_threads
+from conftest import torch_threads, with_words
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
@@ -29,7 +29,7 @@ TINY = ["sac.hidden=[32,32]", "sac.batch_size=32", "sac.buffer_size=2000", "expe
 
 
 def tiny(max_steps: int, *extra: str):
-    return load_expert_config([*TINY, f"expert.max_steps={max_steps}", *extra])
+    return load_expert_config(with_words([*TINY, f"expert.max_steps={max_steps}"], *extra))
 
 
 @pytest.fixture(scope="module")

@@ -23,7 +23,7 @@ from fmctd_dist.config import REPO_ROOT
 from fmctd_dist.families.maze.ant_controller import AntPlanController, run_plan
 from fmctd_dist.diffusion.checkpoint import load_train_state
 from fmctd_dist.errors import CheckpointError, ConfigError
-from conftest import torch_threads
+from conftest import torch_threads, with_words
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
@@ -35,7 +35,8 @@ TINY_POLICY = ["policy.hidden=[32,32]", "policy.batch_size=64", "policy.lr=1e-3"
 
 
 def tiny(root, max_steps: int, *extra: str):
-    return load_policy_args([*TINY_ANT, f"data.root={root}", *TINY_POLICY, f"policy.max_steps={max_steps}", *extra])
+    return load_policy_args(with_words([*TINY_ANT, f"data.root={root}", *TINY_POLICY, f"policy.max_steps={max_steps}"],
+                                       *extra))
 
 
 @pytest.fixture(scope="module")

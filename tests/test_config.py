@@ -95,3 +95,30 @@ def test_wall_test_is_for_point_and_ant_mazes_only():
     assert load_config(["env=antmaze-large", "method.wall_test=true"]).method.wall_test
     with pytest.raises(ConfigError, match="method.wall_test"):
         load_config(["env=cube-single", "method.wall_test=true"])
+
+
+def _roots():
+    """Every config root's loader, with a float field under its own prefix that must be > 0."""
+    from fmctd_dist.control.policy.config import load_policy_args
+    from fmctd_dist.families.maze.expert.config import load_expert_config
+    from fmctd_dist.families.visual.config import load_parts_args
+
+    return {"planner": (load_config, "train.lr"), "ant expert": (load_expert_config, "sac.lr"),
+            "visual parts": (lambda words: load_parts_args(["part=vae", *words]), "vae.lr"),
+            "policy": (load_policy_args, "policy.lr")}
+
+
+@pytest.mark.parametrize("root", ["planner", "ant expert", "visual parts", "policy"])
+def test_every_config_root_goes_through_the_one_loader(root):
+    """The side roots parse, merge and range-check their words as the planner's config does: same error shapes."""
+    load, key = _roots()[root]
+    bad = {(key,): f"override '{key}' is not key=value; e.g. ",
+           (f"{key}r=1",): f"unknown config key '{key}r' (did you mean '{key}'?)",
+           (f"{key}=0.1", f"{key}=0.2"): f"{key} is given twice ({key}=0.1 and {key}=0.2); give it once",
+           (f"{key}=abc",): f"override {key}=abc: {key}: Value 'abc' of type 'str' could not be converted to Float",
+           (f"{key}=0.0",): f"{key}=0.0 must be > 0",
+           (f"{key}=nan",): f"{key}=nan must be > 0"}
+    for words, start in bad.items():
+        with pytest.raises(ConfigError) as e:
+            load(list(words))
+        assert str(e.value).startswith(start), (words, str(e.value))

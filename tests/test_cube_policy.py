@@ -21,7 +21,7 @@ from fmctd_dist.control.policy.train import train_policy
 from fmctd_dist.families.maze.subgoal import SubgoalTracker
 from fmctd_dist.diffusion.checkpoint import load_train_state
 from fmctd_dist.errors import CheckpointError, ConfigError
-from conftest import torch_threads
+from conftest import torch_threads, with_words
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
@@ -33,8 +33,8 @@ TINY_POLICY = ["policy.hidden=[32,32]", "policy.batch_size=64", "policy.lr=1e-3"
 
 
 def tiny(root, max_steps: int, *extra: str):
-    return load_policy_args([*TINY_CUBE, f"data.root={root}", *TINY_POLICY, f"policy.max_steps={max_steps}",
-                             *extra])
+    return load_policy_args(with_words([*TINY_CUBE, f"data.root={root}", *TINY_POLICY, f"policy.max_steps={max_steps}"],
+                                       *extra))
 
 
 @pytest.fixture(scope="module")
@@ -179,7 +179,7 @@ def test_job_scripts_smoke(data_root, trained, tmp_path):
                        capture_output=True, text=True, timeout=300, env=env)
     assert r.returncode == 0, r.stderr
     assert "10 steps" in r.stdout and "policy  reach" in r.stdout and "oracle  reach" in r.stdout
-    r = subprocess.run([sys.executable, str(REPO_ROOT / "jobs" / "eval_policy.py"), *words, "reach.rows=1"],
+    r = subprocess.run([sys.executable, str(REPO_ROOT / "jobs" / "eval_policy.py"), *with_words(words, "reach.rows=1")],
                        capture_output=True, text=True, timeout=300, env=env)
     assert r.returncode == 0, r.stderr
     assert all(f"{n:7s} reach" in r.stdout for n in ("policy", "oracle", "zero")), r.stdout

@@ -54,7 +54,7 @@ FIELDS = numeric_fields()
 
 
 def test_every_numeric_field_declares_its_range():
-    ranges = field_ranges()
+    ranges = field_ranges(Config())
     undeclared = [k for k, _ in FIELDS if k not in ranges or ranges[k].describe() == ""]
     assert not undeclared, f"numeric config fields without a declared range: {undeclared}"
     print(f"{len(FIELDS)} numeric config fields, each with a declared range")
@@ -63,7 +63,7 @@ def test_every_numeric_field_declares_its_range():
 
 @pytest.mark.parametrize("key, ftype", FIELDS, ids=[f"{i + 1}/{len(FIELDS)}:{k}" for i, (k, _) in enumerate(FIELDS)])
 def test_out_of_range_value_is_one_config_error_naming_the_field(key, ftype):
-    value = out_of_range(field_ranges()[key], ftype)
+    value = out_of_range(field_ranges(Config())[key], ftype)
     with pytest.raises(ConfigError) as e:
         load_config([f"{key}={value}"])
     assert str(e.value).startswith(f"{key}="), str(e.value)

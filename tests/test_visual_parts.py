@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import TINY_DATA, torch_threads
+from conftest import TINY_DATA, torch_threads, with_words
 from fmctd_dist.config import REPO_ROOT
 from fmctd_dist.families.visual.env import render_states
 from fmctd_dist.errors import CheckpointError, ConfigError, DatasetError
@@ -31,8 +31,8 @@ TINY_PARTS = ["vae.latent_dim=3", "vae.channels=[8,16,16]", "vae.max_steps=6", "
 
 def _args(root: Path, out: Path, *extra: str) -> list[str]:
     words = [w for w in TINY_DATA if not w.startswith("env=")]
-    return [f"env={MEDIUM}", *words, f"data.root={root}", *TINY_PARTS, f"vae.out={out / 'vae'}",
-            f"estimator.out={out / 'estimator'}", f"invdyn.out={out / 'invdyn'}", *extra]
+    return with_words([f"env={MEDIUM}", *words, f"data.root={root}", *TINY_PARTS, f"vae.out={out / 'vae'}",
+                       f"estimator.out={out / 'estimator'}", f"invdyn.out={out / 'invdyn'}"], *extra)
 
 
 def _load(root: Path, out: Path, part: str, *extra: str):

@@ -4,8 +4,9 @@ A config of its own, like the expert's (:mod:`fmctd_dist.families.maze.expert.co
 digest is recorded with every result row, and training a low-level policy must not change
 it. The dataset is still named by the planner's keys (``env=``, ``data.root``,
 ``data.episodes``, ...), so a job's words are split: ``policy.*`` / ``reach.*`` go here,
-everything else to :func:`fmctd_dist.config.load_config`. A field's default is the ant's unless
-``FAMILY_DEFAULTS`` gives the cube another (words on the command line win over both).
+everything else to the planner's config, through the one loader (:mod:`fmctd_dist.config.loader`). A
+field's default is the ant's unless ``FAMILY_DEFAULTS`` gives the cube another (words on the command line
+win over both).
 """
 
 from __future__ import annotations
@@ -15,14 +16,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from omegaconf import OmegaConf
-
-from fmctd_dist.config import ALIASES, GROUPS, Config, all_keys, apply_override, load_config, merge_checked, \
-    resolve_path
+from fmctd_dist.config import (Config, build, check_ranges, from_dict, parse_overrides, planner_config, resolve_path,
+                               spec)
 from fmctd_dist.control.policy.hooks import spec_for_env
-from fmctd_dist.errors import ConfigError, did_you_mean
+from fmctd_dist.errors import ConfigError
 
-PREFIXES = ("policy.", "reach.")
 # Per-family defaults that differ from the ant's (the dataclass defaults). The cube's reach test follows a
 # whole pick-and-place (up to ~100 steps) to OGBench's 0.04 m success radius (0.4 obs units).
 FAMILY_DEFAULTS: dict[str, dict[str, Any]] = {
@@ -38,32 +36,36 @@ class PolicyTrainConfig:
     # (each >= 1), cut at the episode's (or the upright run's) end. 2 x Geometric(0.2): mean 10 steps, mode 5-6,
     # 90% within 2..19 steps (see fmctd_dist.families.maze.ant_policy_rows.sample_offsets).
     geom_p: float = 0.2
-    geom_draws: int = 2
-    max_subgoal_dist: float = 4.0  # the relative subgoal's norm is clipped here (input and training); 0 = no clip
+    geom_draws: int = spec(2, gt=0)
+    # the relative subgoal's norm is clipped here (input and training); 0 = no clip
+    max_subgoal_dist: float = spec(4.0, ge=0)
     drop_fallen: bool = True  # ant: train only on rows where it is healthy and upright (a fallen ant never recovers)
     # Optimiser steps. 100k x 256 ~ 29 passes over full medium data (~0.88M upright rows), ~9 min on one busy
     # core. Small data overfits: 20 episodes peak at ~2k steps (manifest metrics best_val_step tells).
-    max_steps: int = 100_000
-    batch_size: int = 256
-    lr: float = 3e-4  # Adam
-    weight_decay: float = 0.0  # AdamW decoupled weight decay
-    seed: int = 0  # init, batches and the fixed validation set
-    threads: int = 1  # torch intra-op threads; 0 = torch default (one per core; slow on busy cores)
-    time_budget_s: float = 0.0  # stop at the first checkpoint after this many seconds of this call (0 = none)
-    ckpt_every: int = 1000  # steps between checkpoints (model.pt + manifest.json + train_state.pt)
-    val_every: int = 1000  # steps between validation losses
-    val_rows: int = 4096  # fixed (row, subgoal) pairs drawn once from the val split
-    log_every: int = 50  # steps between progress-bar updates
+    max_steps: int = spec(100_000, gt=0)
+    batch_size: int = spec(256, gt=0)
+    lr: float = spec(3e-4, gt=0)  # Adam
+    weight_decay: float = spec(0.0, ge=0)  # AdamW decoupled weight decay
+    seed: int = spec(0, ge=0)  # init, batches and the fixed validation set
+    threads: int = spec(1, ge=0)  # torch intra-op threads; 0 = torch default (one per core; slow on busy cores)
+    # stop at the first checkpoint after this many seconds of this call (0 = none)
+    time_budget_s: float = spec(0.0, ge=0)
+    ckpt_every: int = spec(1000, gt=0)  # steps between checkpoints (model.pt + manifest.json + train_state.pt)
+    val_every: int = spec(1000, gt=0)  # steps between validation losses
+    val_rows: int = spec(4096, gt=0)  # fixed (row, subgoal) pairs drawn once from the val split
+    log_every: int = spec(50, gt=0)  # steps between progress-bar updates
 
 
 @dataclass
 class ReachConfig:
-    rows: int = 200  # val rows tried (0 = no reach evaluation at the end of training)
-    offset: int = 10  # ant: subgoal = the val episode's x, y this many steps on; cube: the subgoal interval
-    max_steps: int = 50  # env steps per try (cube default 150)
-    radius: float = 1.0  # reached = within this of the goal after a step (ant: its advance radius; cube default 0.4)
-    advance: float = 1.0  # cube: the subgoal moves on once the cube is within this of it (obs units, the authors')
-    seed: int = 0  # which rows
+    rows: int = spec(200, ge=0)  # val rows tried (0 = no reach evaluation at the end of training)
+    offset: int = spec(10, gt=0)  # ant: subgoal = the val episode's x, y this many steps on; cube: the subgoal interval
+    max_steps: int = spec(50, gt=0)  # env steps per try (cube default 150)
+    # reached = within this of the goal after a step (ant: its advance radius; cube default 0.4)
+    radius: float = spec(1.0, gt=0)
+    # cube: the subgoal moves on once the cube is within this of it (obs units, the authors')
+    advance: float = spec(1.0, gt=0)
+    seed: int = spec(0, ge=0)  # which rows
     expert: bool = True  # also measure the family's scripted reference (ant expert / OGBench's CubePlanOracle) ...
     zero: bool = True  # ... and zero actions (the floor)
 
@@ -87,55 +89,25 @@ def policy_dir(cfg: Config, pcfg: PolicyConfig) -> Path:
 
 def load_policy_args(args: list[str] | None = None) -> tuple[Config, PolicyConfig]:
     """Split ``key=value`` words: ``policy.*`` / ``reach.*`` -> PolicyConfig, the rest -> the planner's Config."""
-    pkeys = all_keys(PolicyConfig())
-    cfg_words: list[str] = []
-    pwords: list[tuple[str, str]] = []
-    for arg in args or []:
-        if "=" not in arg:
-            raise ConfigError(f"override {arg!r} is not key=value; e.g. env=antmaze-medium or policy.max_steps=5000")
-        key, value = (s.strip() for s in arg.split("=", 1))
-        if key.startswith(PREFIXES):
-            if key not in pkeys:
-                raise ConfigError(f"unknown config key {key!r}{did_you_mean(key, pkeys)}")
-            pwords.append((key, value))
-            continue
-        known = all_keys(Config()) + list(GROUPS) + list(ALIASES)
-        if key not in known:
-            raise ConfigError(f"unknown config key {key!r}{did_you_mean(key, known + pkeys)}")
-        cfg_words.append(arg)
-    cfg = load_config(cfg_words, env="antmaze-medium", method="mctd")  # cube: no planner yet
-    spec = spec_for_env(cfg.env.name)  # a point maze: one ConfigError (it has the PD controller)
-    pcfg = OmegaConf.structured(PolicyConfig)
-    for key, value in [*FAMILY_DEFAULTS.get(spec.family, {}).items(), *pwords]:
-        pcfg = apply_override(pcfg, key, str(value), PolicyConfig())
-    obj: PolicyConfig = OmegaConf.to_object(pcfg)  # type: ignore[assignment]
-    validate_policy(obj)
-    return cfg, obj
+    groups, dotted, pwords = parse_overrides(list(args or []), PolicyConfig(),
+                                             example="env=antmaze-medium or policy.max_steps=5000")
+    cfg = planner_config(groups, dotted, env="antmaze-medium", method="mctd")  # cube: no planner yet
+    family = spec_for_env(cfg.env.name).family  # a point maze: one ConfigError (it has the PD controller)
+    defaults = [(key, str(value)) for key, value in FAMILY_DEFAULTS.get(family, {}).items()]
+    return cfg, build(PolicyConfig, [*defaults, *pwords], validate_policy)
 
 
 def policy_config_from_dict(d: dict[str, Any]) -> PolicyConfig:
     """Rebuild from ``to_dict()`` output (manifests, train states)."""
-    cfg = merge_checked(OmegaConf.structured(PolicyConfig), OmegaConf.create(d), "config dict", PolicyConfig())
-    return OmegaConf.to_object(cfg)  # type: ignore[return-value]
+    return from_dict(PolicyConfig, d)
 
 
 def validate_policy(cfg: PolicyConfig) -> None:
-    """Raise one ConfigError naming the field and the fix."""
-    p, r = cfg.policy, cfg.reach
-    for key, value in (("policy.max_steps", p.max_steps), ("policy.batch_size", p.batch_size), ("policy.lr", p.lr),
-                       ("policy.geom_draws", p.geom_draws), ("policy.ckpt_every", p.ckpt_every),
-                       ("policy.val_every", p.val_every), ("policy.val_rows", p.val_rows),
-                       ("policy.log_every", p.log_every), ("reach.offset", r.offset),
-                       ("reach.max_steps", r.max_steps), ("reach.radius", r.radius), ("reach.advance", r.advance)):
-        if value <= 0:
-            raise ConfigError(f"{key}={value} must be > 0")
-    for key, value in (("policy.weight_decay", p.weight_decay), ("policy.seed", p.seed),
-                       ("policy.threads", p.threads), ("policy.max_subgoal_dist", p.max_subgoal_dist),
-                       ("policy.time_budget_s", p.time_budget_s),
-                       ("reach.rows", r.rows), ("reach.seed", r.seed)):
-        if value < 0:
-            raise ConfigError(f"{key}={value} must be >= 0")
-    if not 0 < p.geom_p <= 1:
-        raise ConfigError(f"policy.geom_p={p.geom_p} must be in (0, 1]; mean offset = policy.geom_draws / geom_p")
-    if not p.hidden or any(h <= 0 for h in p.hidden):
-        raise ConfigError(f"policy.hidden={p.hidden} must be a non-empty list of positive widths, e.g. [256,256,256]")
+    """Declared ranges, then the rest; raise one ConfigError naming the field and the fix."""
+    check_ranges(cfg)
+    if not 0 < cfg.policy.geom_p <= 1:
+        raise ConfigError(f"policy.geom_p={cfg.policy.geom_p} must be in (0, 1]; mean offset = policy.geom_draws / "
+                          "geom_p")
+    if not cfg.policy.hidden or any(h <= 0 for h in cfg.policy.hidden):
+        raise ConfigError(f"policy.hidden={cfg.policy.hidden} must be a non-empty list of positive widths, e.g. "
+                          "[256,256,256]")

@@ -1,11 +1,11 @@
 """Config of the visual maze's pre-trained parts: ``vae.*``, ``latents.*``, ``estimator.*``, ``invdyn.*``, ``reach.*``.
 
-A config of its own, like the ant policy's (:mod:`fmctd_dist.families.maze.expert.policy_config`): the planner's
+A config of its own, like the ant expert's (:mod:`fmctd_dist.families.maze.expert.config`): the planner's
 config digest is recorded with every result row, and training a VAE must not change it. Which
 frames and episodes are used is still the planner's business (``env=``, ``data.*``,
 ``visual.frames``, ``visual.episodes``), so a job's words are split: these prefixes go here,
-everything else to :func:`fmctd_dist.config.load_config`. Ranges are declared beside each field
-(``spec``) and checked in one place, as in the planner's config.
+everything else to the planner's config, through the one loader (:mod:`fmctd_dist.config.loader`).
+Ranges are declared beside each field (``spec``) and checked in one place, as in the planner's config.
 """
 
 from __future__ import annotations
@@ -15,17 +15,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from omegaconf import OmegaConf
-
-from fmctd_dist.config import (ALIASES, GROUPS, SEED, THREADS, Config, all_keys, apply_override, field_ranges,
-                               load_config, merge_checked, resolve_path, spec)
+from fmctd_dist.config import (SEED, THREADS, Config, build, check_ranges, parse_overrides, planner_config,
+                               resolve_path, spec)
 from fmctd_dist.errors import ConfigError, did_you_mean
 from fmctd_dist.registry import require_family
 
 VISUAL_FAMILY = "visual-pointmaze"
 
 LATENT_KEY = "latents"  # the planner manifest's field holding the latent provenance (families/visual/dataset.py)
-PREFIXES = ("vae.", "latents.", "estimator.", "invdyn.", "reach.")
 PARTS = ("vae", "episodes", "latents", "estimator", "invdyn", "reach")
 OUT = "where it is written and read; '' -> checkpoints/<env>-<part>"
 
@@ -110,48 +107,16 @@ def part_dir(cfg: Config, out: str, part: str) -> Path:
     return resolve_path(out or f"checkpoints/{cfg.env.name}-{part}")
 
 
-def validate_parts(p: PartsConfig) -> None:
-    for key, rng in field_ranges(p).items():
-        node: Any = p
-        for name in key.split("."):
-            node = getattr(node, name)
-        rng.check(key, node)
-
-
 def load_parts_args(args: list[str] | None = None) -> tuple[Config, PartsConfig, str]:
-    """Split ``key=value`` words: ``part=`` names the part, the four prefixes -> PartsConfig, the rest -> Config."""
-    pkeys = all_keys(PartsConfig())
-    cfg_words: list[str] = []
-    part = ""
-    pcfg = OmegaConf.structured(PartsConfig)
-    for arg in args or []:
-        if "=" not in arg:
-            raise ConfigError(f"override {arg!r} is not key=value; e.g. part=vae or vae.time_budget_s=600")
-        key, value = (s.strip() for s in arg.split("=", 1))
-        if key == "part":
-            if value not in PARTS:
-                raise ConfigError(f"part={value!r} is not known{did_you_mean(value, PARTS)}; choose one of: "
-                                  f"{', '.join(PARTS)}")
-            part = value
-        elif key.startswith(PREFIXES):
-            if key not in pkeys:
-                raise ConfigError(f"unknown config key {key!r}{did_you_mean(key, pkeys)}")
-            pcfg = apply_override(pcfg, key, value, PartsConfig())
-        else:
-            known = all_keys(Config()) + list(GROUPS) + list(ALIASES)
-            if key not in known:
-                raise ConfigError(f"unknown config key {key!r}{did_you_mean(key, known + pkeys)}")
-            cfg_words.append(arg)
-    if not part:
+    """Split ``key=value`` words: ``part=`` names the part, ``vae.*`` ... ``reach.*`` -> PartsConfig, the rest ->
+    the planner's Config."""
+    groups, dotted, pwords = parse_overrides(list(args or []), PartsConfig(), special=("part",),
+                                             example="part=vae or vae.time_budget_s=600")
+    part = groups.pop("part", None)
+    if part is None:
         raise ConfigError(f"part= is missing; choose one of: {', '.join(PARTS)} (in that order: each needs the last)")
-    cfg = load_config(cfg_words, env="visual-pointmaze-medium", method="mctd")
+    if part not in PARTS:
+        raise ConfigError(f"part={part!r} is not known{did_you_mean(part, PARTS)}; choose one of: {', '.join(PARTS)}")
+    cfg = planner_config(groups, dotted, env="visual-pointmaze-medium", method="mctd")
     require_family(cfg.env.name, (VISUAL_FAMILY,), "the visual maze's VAE, estimator and inverse dynamics")
-    obj: PartsConfig = OmegaConf.to_object(pcfg)  # type: ignore[assignment]
-    validate_parts(obj)
-    return cfg, obj, part
-
-
-def parts_config_from_dict(d: dict[str, Any]) -> PartsConfig:
-    """Rebuild from ``to_dict()`` output (manifests, train states)."""
-    cfg = merge_checked(OmegaConf.structured(PartsConfig), OmegaConf.create(d), "config dict", PartsConfig())
-    return OmegaConf.to_object(cfg)  # type: ignore[return-value]
+    return cfg, build(PartsConfig, pwords, check_ranges), part
