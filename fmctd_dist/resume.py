@@ -43,7 +43,8 @@ def load_train_state(out_dir: str | Path) -> dict[str, Any] | None:
 
 
 def check_resume(out: Path, what: str, fresh: str, saved: dict[str, Any], now: dict[str, Any],
-                 keys: Iterable[str] = (), data: Iterable[tuple[str, Any, Any]] = (), data_fix: str = "use the data it started on") -> None:
+                 keys: Iterable[str] = (), data: Iterable[tuple[str, Any, Any]] = (),
+                 data_fix: str = "use the data it started on") -> None:
     """A resumed run trains what the saved one trained, on the same data, or one CheckpointError.
 
     ``keys``: dotted config keys whose ``saved`` and ``now`` values must agree (fixed by setting the key
