@@ -54,14 +54,15 @@ def train_vae(cfg: Config, pcfg: PartsConfig, progress: bool = True, frames: Fra
     out = part_dir(cfg, v.out, "vae")
     fs = frames or load_frame_set(cfg)
     state = load_train_state(out)
-    if state is None and (out / MANIFEST_FILE).exists():
-        m = read_part_manifest(out, "vae", cfg.env.name)
-        return {"out_dir": str(out), "step": m["steps"], "wall_time_s": m["wall_time_s"], **m["metrics"]}
     if state is not None:
         check_resume(out, "VAE", "vae.out", {"vae": state["config"], "env": state["env"]},
                      {"vae": pcfg.to_dict()["vae"], "env": cfg.env.name}, [f"vae.{k}" for k in RESUME_FIELDS] + ["env"],
                      [("frames", state["frames_sha256"], fs.sha256)],
                      "set visual.frames / visual.frames_seed as they were")
+    if (out / MANIFEST_FILE).exists() and (state is None or int(state["step"]) >= v.max_steps
+                                           or Clock(state["wall_time_s"]).over(v.time_budget_s)):
+        m = read_part_manifest(out, "vae", cfg.env.name)  # finished earlier (budget or steps): nothing to do
+        return {"out_dir": str(out), "step": m["steps"], "wall_time_s": m["wall_time_s"], **m["metrics"]}
 
     net = build_vae(v.latent_dim, v.channels, v.seed)
     opt = torch.optim.Adam(net.parameters(), lr=v.lr)
@@ -103,10 +104,6 @@ def train_vae(cfg: Config, pcfg: PartsConfig, progress: bool = True, frames: Fra
     images = torch.from_numpy(fs.train_images)
     net.train()
     stop = step >= v.max_steps or clock.over(v.time_budget_s)
-    if stop and (out / MANIFEST_FILE).exists():  # finished earlier (budget or steps): nothing to do
-        bar.close()
-        m = read_part_manifest(out, "vae", cfg.env.name)
-        return {"out_dir": str(out), "step": m["steps"], "wall_time_s": m["wall_time_s"], **m["metrics"]}
     while not stop:
         idx = rng.integers(0, len(images), size=v.batch_size)
         loss, mse, kl = vae_loss(net, images[idx], v.kl_weight, gen)
