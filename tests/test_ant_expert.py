@@ -14,11 +14,12 @@ import torch
 
 from fmctd_dist.families.maze.expert.config import load_expert_config
 from fmctd_dist.families.maze.expert.direction_env import ACT_DIM, ANT_OBS_DIM, OBS_DIM, AntDirectionEnv, expert_input
-from fmctd_dist.families.maze.expert.expert import MODEL_FILE, load_expert
+from fmctd_dist.artifacts import MODEL_FILE
+from fmctd_dist.families.maze.expert.expert import load_expert
 from fmctd_dist.families.maze.expert.sac import SAC, ReplayBuffer
 from fmctd_dist.families.maze.expert.train import train_expert
 from fmctd_dist.config import REPO_ROOT
-from fmctd_dist.diffusion.checkpoint import load_train_state
+from fmctd_dist.resume import load_train_state
 from fmctd_dist.errors import CheckpointError, ConfigError
 from conftest import torch_threads, with_words
 

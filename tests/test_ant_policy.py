@@ -15,13 +15,14 @@ import torch
 
 from fmctd_dist.families.maze.ant_policy import NAME, policy_input
 from fmctd_dist.families.maze.ant_policy_rows import make_rows, run_ends
-from fmctd_dist.control.policy.checkpoint import MODEL_FILE, load_policy
+from fmctd_dist.artifacts import MODEL_FILE
+from fmctd_dist.control.policy.checkpoint import load_policy
 from fmctd_dist.control.policy.config import load_policy_args
 from fmctd_dist.control.policy.hindsight import sample_offsets, sample_pairs
 from fmctd_dist.control.policy.train import train_policy
 from fmctd_dist.config import REPO_ROOT
 from fmctd_dist.families.maze.ant_controller import AntPlanController, run_plan
-from fmctd_dist.diffusion.checkpoint import load_train_state
+from fmctd_dist.resume import load_train_state
 from fmctd_dist.errors import CheckpointError, ConfigError
 from conftest import torch_threads, with_words
 

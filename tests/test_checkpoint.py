@@ -10,10 +10,9 @@ import torch
 
 from fmctd_dist.config import Config, load_config
 from fmctd_dist.denoiser.local import LocalDenoiser
-from fmctd_dist.diffusion.checkpoint import (
-    MANIFEST_FILE, MODEL_FILE, load_checkpoint, load_train_state, normaliser_from_manifest, save_checkpoint,
-    save_train_state, sha256_file,
-)
+from fmctd_dist.artifacts import MANIFEST_FILE, MODEL_FILE, sha256_file
+from fmctd_dist.diffusion.checkpoint import load_checkpoint, normaliser_from_manifest, save_checkpoint
+from fmctd_dist.resume import load_train_state, save_train_state
 from fmctd_dist.diffusion.model import DFTransformer
 from fmctd_dist.errors import CheckpointError
 

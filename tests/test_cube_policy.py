@@ -19,7 +19,7 @@ from fmctd_dist.families.cube.policy_rows import load_cube_policy_data, make_row
 from fmctd_dist.control.policy.hindsight import label_run_ends, sample_pairs
 from fmctd_dist.control.policy.train import train_policy
 from fmctd_dist.families.maze.subgoal import SubgoalTracker
-from fmctd_dist.diffusion.checkpoint import load_train_state
+from fmctd_dist.resume import load_train_state
 from fmctd_dist.errors import CheckpointError, ConfigError
 from conftest import torch_threads, with_words
 

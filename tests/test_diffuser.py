@@ -17,7 +17,8 @@ from fmctd_dist.families.maze.data import load_dataset
 from fmctd_dist.data.windows import train_data
 from fmctd_dist.denoiser.local import LocalDenoiser
 from fmctd_dist.denoiser.protocol import DenoiseBatch
-from fmctd_dist.diffusion.checkpoint import load_checkpoint, load_train_state, normaliser_from_manifest
+from fmctd_dist.diffusion.checkpoint import load_checkpoint, normaliser_from_manifest
+from fmctd_dist.resume import load_train_state
 from fmctd_dist.diffusion.models import build_model
 from fmctd_dist.diffusion.sampler import make_consts
 from fmctd_dist.diffusion.schedule import alphas_cumprod, cosine_betas, linear_betas, make_betas

@@ -13,7 +13,8 @@ from test_train_loop import FakeData, tiny_cfg
 from fmctd_dist.config import Config, DiffusionConfig, ModelConfig, config_from_dict
 from fmctd_dist.denoiser.local import LocalDenoiser
 from fmctd_dist.denoiser.protocol import DenoiseBatch
-from fmctd_dist.diffusion.checkpoint import MANIFEST_FILE, load_checkpoint, write_manifest
+from fmctd_dist.artifacts import MANIFEST_FILE, write_manifest
+from fmctd_dist.diffusion.checkpoint import load_checkpoint
 from fmctd_dist.diffusion.model import DFTransformer
 from fmctd_dist.diffusion.sampler import GUIDANCE_GAIN, goal_reward, make_consts, transition
 from fmctd_dist.diffusion.schedule import PyramidSchedule

@@ -10,7 +10,8 @@ import torch
 
 from fmctd_dist.config import Config, load_config
 from fmctd_dist.tokens import Normaliser
-from fmctd_dist.diffusion.checkpoint import load_checkpoint, load_train_state
+from fmctd_dist.diffusion.checkpoint import load_checkpoint
+from fmctd_dist.resume import load_train_state
 from fmctd_dist.diffusion.model import DFTransformer
 from fmctd_dist.diffusion.train import DFLoss, lr_at, train
 from fmctd_dist.errors import CheckpointError
@@ -213,7 +214,7 @@ def test_snapshots_for_quality_curves(tmp_path, monkeypatch):
     """train.snapshot_every_s keeps loadable copies of the shipped weights; a resumed run neither repeats nor
     skips one (the folder says which exist)."""
     from fmctd_dist.diffusion import train as train_mod
-    from fmctd_dist.diffusion.train import SNAPSHOTS, snapshot_due
+    from fmctd_dist.resume import SNAPSHOTS, snapshot_due
 
     assert snapshot_due(tmp_path, 0.0, 1e9) is None and snapshot_due(tmp_path, 60.0, 59.0) is None
     assert snapshot_due(tmp_path, 60.0, 130.0) == "k002"

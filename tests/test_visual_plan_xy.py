@@ -81,7 +81,7 @@ def test_plan_frames_carry_the_estimators_position_and_give_back_the_latent():
 
 def test_widened_weights_predict_the_old_numbers_as_the_old_model_does():
     """widen_frames: the old frame numbers' x0_hat is unchanged whatever the new numbers hold; new ones start at 0."""
-    from fmctd_dist.diffusion.checkpoint import widen_frames
+    from fmctd_dist.diffusion.init_from import widen_frames
     from fmctd_dist.diffusion.model import DFTransformer
 
     torch.manual_seed(0)
@@ -98,7 +98,7 @@ def test_widened_weights_predict_the_old_numbers_as_the_old_model_does():
 
 @needs_parts
 def test_init_from_a_latent_model_widens_it_and_refuses_a_narrower_config(tmp_path):
-    from fmctd_dist.diffusion.checkpoint import load_init_weights
+    from fmctd_dist.diffusion.init_from import load_init_weights
 
     cfg = load_config([f"env={MEDIUM}", "jump=5", "visual.plan_xy=true"])
     state, prov = load_init_weights(SHIPPED, cfg)

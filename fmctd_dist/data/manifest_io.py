@@ -2,12 +2,11 @@
 
 Navigate, cube and visual-frame stores each check their own fields after this; the three
 ways a manifest can be unreadable are worded once, each with the fix the caller gives.
-:func:`sha256_file` is the digest every manifest records for its files.
+The sha256 every manifest records for its files is :func:`fmctd_dist.artifacts.sha256_file`.
 """
 
 from __future__ import annotations
 
-import hashlib
 import json
 from pathlib import Path
 from typing import Any
@@ -28,15 +27,6 @@ def read_manifest_json(path: Path, missing_fix: str, broken_fix: str, what: str 
     if not isinstance(manifest, dict):
         raise DatasetError(f"{mf} holds a JSON {type(manifest).__name__}, not an object; {broken_fix}")
     return manifest
-
-
-def sha256_file(path: Path) -> str:
-    """Hex sha256 of a file, read in 1 MiB blocks (datasets are hundreds of MB)."""
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 def split_lines(manifest: dict[str, Any]) -> list[str]:

@@ -1,10 +1,10 @@
-"""Checkpoints: ``model.pt`` (state_dict only) + ``manifest.json`` (+ ``train_state.pt`` to resume).
+"""Planner checkpoints: what a planner's manifest holds, its agreement with a config, fine-tuning lineage.
 
 A plan is a pure function of (config, checkpoint digest, seed), so a checkpoint must say
 exactly what it is: the manifest records the config, dataset digest, git sha and the
 sha256 of ``model.pt``, and loading checks all of it against the caller's config before
-any model is built. Everything loads with ``torch.load(weights_only=True)`` (no pickled
-code). Files are written to ``*.tmp`` and ``os.replace``d, so a kill never leaves half a file.
+any model is built. The files themselves are written, read and verified by
+:mod:`fmctd_dist.artifacts`, as every trained part's are.
 """
 
 from __future__ import annotations
@@ -12,17 +12,14 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
-import os
-import pickle
 import shlex
 from functools import lru_cache
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
-import numpy as np
-import torch
-from torch import nn
-
+from fmctd_dist.artifacts import (
+    MANIFEST_FILE, MODEL_FILE, Types, load_weights, read_weights_manifest, save_weights, type_error, verify_weights,
+)
 from fmctd_dist.config import REPO_ROOT, Config, ModelConfig, resolve_path
 from fmctd_dist.tokens import Normaliser
 from fmctd_dist.diffusion.model import DFTransformer
@@ -30,9 +27,6 @@ from fmctd_dist.diffusion.models import build_model, diffusion_config_from_dict,
 from fmctd_dist.errors import CheckpointError
 from fmctd_dist.hints import shown, train_command, training_words, word
 
-MODEL_FILE = "model.pt"
-MANIFEST_FILE = "manifest.json"
-TRAIN_STATE_FILE = "train_state.pt"
 FORMAT_VERSION = 1
 MODEL_FIELDS = ("kind", "frame_stack", "width", "layers", "heads", "ff", "param", "norm")
 UNET_FIELDS = ("unet_channels", "unet_kernel", "unet_padding", "unet_edge_frames")  # checked when kind=diffuser
@@ -43,50 +37,14 @@ SHAPE_FREE_FIELDS = ("unet_padding", "unet_edge_frames")
 DIFFUSION_FIELDS = ("timesteps", "beta_schedule", "beta_start", "beta_end")
 
 
-def _model_fields(cfg: Config) -> tuple[str, ...]:
+def model_fields(cfg: Config) -> tuple[str, ...]:
     return MODEL_FIELDS + (UNET_FIELDS if cfg.model.kind == "diffuser" else ())
 
 
-def _saved_model(manifest: dict[str, Any]) -> dict[str, Any]:
+def saved_model(manifest: dict[str, Any]) -> dict[str, Any]:
     """A manifest's model config, with the defaults of fields added since it was written (unet_padding, ...)."""
     d = manifest.get("config", {}).get("model", {})
     return {**dataclasses.asdict(ModelConfig()), **d} if d else {}
-
-
-def sha256_file(path: str | Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for chunk in iter(lambda: f.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
-
-
-def atomic_torch_save(obj: Any, path: Path) -> None:
-    """Write then rename: a reader (or a killed writer) never sees half a file."""
-    tmp = path.with_name(path.name + ".tmp")
-    torch.save(obj, tmp)
-    os.replace(tmp, path)
-
-
-def write_manifest(manifest: dict[str, Any], path: Path) -> None:
-    """Sorted, indented JSON (numpy values as plain numbers), written atomically."""
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(manifest, indent=2, sort_keys=True, default=_json_default) + "\n")
-    os.replace(tmp, path)
-
-
-def save_weights(out_dir: str | Path, net: nn.Module, fields: dict[str, Any]) -> dict[str, Any]:
-    """Write ``net``'s model.pt (atomically), then its manifest: ``fields`` + param_count, model_sha256 and
-    digest (its first 16 hex). The one writer behind every kind of checkpoint (planner, policy, expert,
-    visual part), so they are all verified the same way."""
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    atomic_torch_save(module_state(net), out_dir / MODEL_FILE)
-    sha = sha256_file(out_dir / MODEL_FILE)
-    manifest = {**fields, "param_count": sum(p.numel() for p in net.parameters()), "model_sha256": sha,
-                "digest": sha[:16]}
-    write_manifest(manifest, out_dir / MANIFEST_FILE)
-    return manifest
 
 
 def save_checkpoint(ckpt_dir: str | Path, model: DFTransformer, manifest_fields: dict[str, Any]) -> dict[str, Any]:
@@ -101,64 +59,6 @@ def save_checkpoint(ckpt_dir: str | Path, model: DFTransformer, manifest_fields:
         raise ValueError("manifest_fields needs 'config' (Config.to_dict())")
     return save_weights(ckpt_dir, model, {**manifest_fields, "format": FORMAT_VERSION, "model_kind": model.kind,
                                           "n_tokens": model.n_tokens, "token_dim": model.token_dim})
-
-
-def _json_default(o: Any) -> Any:
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, np.generic):
-        return o.item()
-    raise TypeError(f"{type(o).__name__} is not JSON serialisable")
-
-
-def first_line(e: BaseException) -> str:
-    """An exception as one short line (torch's unpickling errors run to a page of advice)."""
-    text = str(e).strip().splitlines()
-    return f"{type(e).__name__}: {text[0][:200] if text else ''}"
-
-
-UNPICKLE_WHY = "not a plain tensor state_dict (torch.load(weights_only=True) refused it: pickled code or objects?)"
-
-
-Fix = str | Callable[[], str]  # the fix an error names; a callable is built only when the error is raised
-
-
-def fix_text(fix: Fix) -> str:
-    return fix() if callable(fix) else fix
-
-
-def torch_load_weights(path: Path, where: str, fix: Fix) -> Any:
-    """``torch.load(path, weights_only=True)``; anything that does not load is one CheckpointError.
-
-    weights_only=True unpickles tensors and plain containers only, so a file carrying code
-    (a ``__reduce__`` payload) is refused before any of it runs.
-    """
-    try:
-        return torch.load(path, map_location="cpu", weights_only=True)
-    except pickle.UnpicklingError as e:
-        raise CheckpointError(f"{where}: {path.name} is {UNPICKLE_WHY} ({first_line(e)}); {fix_text(fix)}") from None
-    except Exception as e:  # noqa: BLE001 - truncated zip, bad magic, ...: a bad file either way
-        raise CheckpointError(f"{where}: {path.name} does not load ({first_line(e)}); {fix_text(fix)}") from None
-
-
-def read_weights_manifest(ckpt_dir: Path, who: str, missing_fix: str, broken_fix: str) -> dict[str, Any]:
-    """The manifest of a dir written by :func:`save_weights` (policies, the ant expert, visual parts).
-
-    The three ways such a dir can be unusable before its kind is even read are worded once:
-    ``who: <path> does not exist; missing_fix``, ``who: manifest.json is unreadable (...); broken_fix``
-    and ``who: manifest.json is not a JSON object; broken_fix``. Callers check their own fields after.
-    """
-    for path in (ckpt_dir, ckpt_dir / MODEL_FILE, ckpt_dir / MANIFEST_FILE):
-        if not path.exists():
-            raise CheckpointError(f"{who}: {path} does not exist; {missing_fix}")
-    path = ckpt_dir / MANIFEST_FILE
-    try:
-        manifest = json.loads(path.read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
-        raise CheckpointError(f"{who}: {path} is unreadable ({first_line(e)}); {broken_fix}") from None
-    if not isinstance(manifest, dict):
-        raise CheckpointError(f"{who}: {path} is not a JSON object; {broken_fix}")
-    return manifest
 
 
 def _fresh_dir(cfg: Config) -> Path:
@@ -199,26 +99,11 @@ def _train_fix(cfg: Config | None, where: str | Path | None = None, broken: bool
 
 
 def read_manifest(ckpt_dir: str | Path, cfg: Config | None = None) -> dict[str, Any]:
-    """The manifest of a checkpoint dir; CheckpointError if the dir or its files are missing."""
+    """The well-typed manifest of a checkpoint dir; CheckpointError if the dir or its files are missing."""
     ckpt_dir = Path(ckpt_dir)
-    if not ckpt_dir.exists():
-        raise CheckpointError(f"checkpoint: {ckpt_dir} does not exist; {_train_fix(cfg, ckpt_dir)} "
-                              "or set checkpoint=<dir>")
-    for path in (ckpt_dir / MODEL_FILE, ckpt_dir / MANIFEST_FILE):
-        if not path.exists():
-            raise CheckpointError(f"checkpoint: {path} does not exist (an incomplete checkpoint dir); "
-                                  f"{_train_fix(cfg, ckpt_dir, broken=True)} or set checkpoint=<dir>")
-    path = ckpt_dir / MANIFEST_FILE
-    try:
-        manifest = json.loads(path.read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
-        raise CheckpointError(f"checkpoint: {path} is unreadable ({first_line(e)}); "
-                              f"{_train_fix(cfg, ckpt_dir, broken=True)}") from None
-    bad = manifest_type_error(manifest)
-    if bad:
-        raise CheckpointError(f"checkpoint: {path} is malformed: {bad}; it was not written by jobs/train.py "
-                              f"(or was edited since); {_train_fix(cfg, ckpt_dir, broken=True)}")
-    return manifest
+    return read_weights_manifest(ckpt_dir, "checkpoint", lambda: f"{_train_fix(cfg, ckpt_dir)} or set checkpoint=<dir>",
+                                 lambda: f"{_train_fix(cfg, ckpt_dir, broken=True)} or set checkpoint=<dir>",
+                                 manifest_type_error)
 
 
 def _is_int(v: Any) -> bool:
@@ -234,7 +119,7 @@ def _numbers(v: Any) -> bool:
 
 
 # What every load path reads from a manifest, and the JSON type it must have there.
-MANIFEST_TYPES: dict[str, tuple[Callable[[Any], bool], str]] = {
+MANIFEST_TYPES: Types = {
     "config": (lambda v: isinstance(v, dict), "an object (Config.to_dict())"),
     "config.env": (lambda v: isinstance(v, dict), "an object"),
     "config.env.name": (lambda v: isinstance(v, str), "a string"),
@@ -248,7 +133,7 @@ MANIFEST_TYPES: dict[str, tuple[Callable[[Any], bool], str]] = {
     "normaliser.mean": (_numbers, "a list of numbers"),
     "normaliser.std": (_numbers, "a list of numbers"),
 }
-OPTIONAL_TYPES: dict[str, tuple[Callable[[Any], bool], str]] = {
+OPTIONAL_TYPES: Types = {
     "train_steps": (lambda v: _is_int(v) and v >= 0, "a non-negative integer"),
     "wall_time_s": (_is_num, "a number"),
     "dataset_digest": (lambda v: isinstance(v, str), "a string"),
@@ -257,25 +142,9 @@ OPTIONAL_TYPES: dict[str, tuple[Callable[[Any], bool], str]] = {
 
 def manifest_type_error(manifest: Any) -> str:
     """'' if every field the loaders read has its JSON type, else what is wrong with the first bad one."""
-    if not isinstance(manifest, dict):
-        return f"the top level is a JSON {type(manifest).__name__}, not an object"
-    missing = object()
-
-    def get(dotted: str) -> Any:
-        node: Any = manifest
-        for part in dotted.split("."):
-            node = node.get(part, missing) if isinstance(node, dict) else missing
-        return node
-
-    for table, required in ((MANIFEST_TYPES, True), (OPTIONAL_TYPES, False)):
-        for key, (ok, want) in table.items():
-            v = get(key)
-            if v is missing:
-                if required:
-                    return f"the field {key!r} is missing"
-                continue
-            if not ok(v):
-                return f"{key} is {json.dumps(v)[:60]} ({type(v).__name__}) but must be {want}"
+    bad = type_error(manifest, MANIFEST_TYPES, OPTIONAL_TYPES)
+    if bad:
+        return bad
     saved = manifest["config"]["model"]
     for f in dataclasses.fields(ModelConfig):
         if f.name not in saved:
@@ -296,9 +165,9 @@ def manifest_type_error(manifest: Any) -> str:
 def _mismatch(manifest: dict[str, Any], cfg: Config) -> tuple[str, Any, Any] | None:
     """The first (field, checkpoint's value, config's value) where they disagree, or None."""
     saved = manifest.get("config", {})
-    saved_model = _saved_model(manifest)
+    model = saved_model(manifest)
     pairs = [("env.name", saved.get("env", {}).get("name"), cfg.env.name), ("jump", saved.get("jump"), cfg.jump)]
-    pairs += [(f"model.{f}", saved_model.get(f), getattr(cfg.model, f)) for f in _model_fields(cfg)]
+    pairs += [(f"model.{f}", model.get(f), getattr(cfg.model, f)) for f in model_fields(cfg)]
     pairs += [("n_tokens", manifest.get("n_tokens"), cfg.n_tokens)]
     schedule = saved.get("diffusion") or {}  # absent from manifests of models that do not denoise
     pairs += [(f"diffusion.{f}", schedule[f], getattr(cfg.diffusion, f)) for f in DIFFUSION_FIELDS if f in schedule]
@@ -363,19 +232,8 @@ def verify_checkpoint(ckpt_dir: str | Path, cfg: Config, manifest: dict[str, Any
     ckpt_dir = Path(ckpt_dir)
     manifest = read_manifest(ckpt_dir, cfg) if manifest is None else manifest
     check_compatible(manifest, cfg, ckpt_dir)
-    _verified_sha(ckpt_dir, manifest, f"checkpoint {ckpt_dir}", lambda: _train_fix(cfg, ckpt_dir, broken=True))
+    verify_weights(ckpt_dir, manifest, f"checkpoint {ckpt_dir}", lambda: _train_fix(cfg, ckpt_dir, broken=True))
     return manifest
-
-
-def _verified_sha(ckpt_dir: Path, manifest: dict[str, Any], where: str, fix: Fix) -> str:
-    """sha256 of ``model.pt``, or one CheckpointError if the manifest records another."""
-    sha = sha256_file(ckpt_dir / MODEL_FILE)
-    if sha != manifest.get("model_sha256"):
-        raise CheckpointError(
-            f"{where}: {MODEL_FILE} has sha256 {sha[:16]}... but manifest.json records "
-            f"{str(manifest.get('model_sha256'))[:16]}... (corrupt or overwritten); {fix_text(fix)}"
-        )
-    return sha
 
 
 def load_checkpoint(ckpt_dir: str | Path, cfg: Config | None = None,
@@ -390,21 +248,14 @@ def load_checkpoint(ckpt_dir: str | Path, cfg: Config | None = None,
     manifest = read_manifest(ckpt_dir, cfg)
     if cfg is not None:  # before the sha: a checkpoint of another shape is named as such, corrupt or not
         check_compatible(manifest, cfg, ckpt_dir)
-    sha = _verified_sha(ckpt_dir, manifest, f"checkpoint {ckpt_dir}", lambda: _train_fix(cfg, ckpt_dir, broken=True))
+    where, fix = f"checkpoint {ckpt_dir}", lambda: _train_fix(cfg, ckpt_dir, broken=True)
+    sha = verify_weights(ckpt_dir, manifest, where, fix)
     if expect_digest is not None and expect_digest not in (manifest["digest"], sha):
         raise CheckpointError(
             f"checkpoint {ckpt_dir}: digest {manifest['digest']} differs from the expected {expect_digest}; "
             "the checkpoint changed since the run started; point checkpoint= at the original one"
         )
-    model = model_from_manifest(manifest)
-    state = torch_load_weights(ckpt_dir / MODEL_FILE, f"checkpoint {ckpt_dir}",
-                               lambda: _train_fix(cfg, ckpt_dir, broken=True))
-    try:
-        model.load_state_dict(state, strict=True)
-    except Exception as e:  # noqa: BLE001 - a state_dict of another shape (or not a state_dict) is a bad checkpoint
-        raise CheckpointError(f"checkpoint {ckpt_dir}: {MODEL_FILE} does not fit the model its manifest describes "
-                              f"({first_line(e)}); {_train_fix(cfg, ckpt_dir, broken=True)}") from None
-    return model.eval(), manifest
+    return load_weights(ckpt_dir, model_from_manifest(manifest), where, fix), manifest
 
 
 def lineage(manifest: dict[str, Any], _seen: frozenset[Path] = frozenset()) -> dict[str, Any]:
@@ -468,66 +319,6 @@ def _manifests_by_digest() -> dict[str, list[Path]]:
     return index
 
 
-def load_init_weights(ckpt_dir: str | Path, cfg: Config) -> tuple[dict[str, torch.Tensor], dict[str, Any]]:
-    """Weights to start a run from (``train.init_from``) -> (state_dict, provenance for the manifest).
-
-    Unlike :func:`load_checkpoint` the env, jump and horizon may differ (positions are
-    sinusoidal, so a transformer runs at any token count); the architecture must not.
-    """
-    ckpt_dir = Path(ckpt_dir)
-    manifest = read_manifest(ckpt_dir)
-    _verified_sha(ckpt_dir, manifest, f"train.init_from={ckpt_dir}", "point train.init_from at an intact checkpoint")
-    saved = _saved_model(manifest)
-    for f in _model_fields(cfg):
-        if f not in SHAPE_FREE_FIELDS and saved.get(f) != getattr(cfg.model, f):
-            raise CheckpointError(f"train.init_from={ckpt_dir} has model.{f}={saved.get(f)!r} but the config has "
-                                  f"model.{f}={getattr(cfg.model, f)!r}; set model.{f}={saved.get(f)!r} or start "
-                                  "from scratch (train.init_from=)")
-    state = torch_load_weights(ckpt_dir / MODEL_FILE, f"train.init_from={ckpt_dir}",
-                               "point train.init_from at an intact checkpoint")
-    widened = {}
-    saved_td, fs = int(manifest.get("token_dim", cfg.token_dim)), cfg.model.frame_stack
-    if saved_td != cfg.token_dim:
-        old = saved_td // fs
-        if cfg.model.kind != "df" or saved_td % fs or old >= cfg.frame_dim:
-            raise CheckpointError(f"train.init_from={ckpt_dir} models {saved_td} numbers per token but this config "
-                                  f"has {cfg.token_dim} ({cfg.frame_dim} per frame x model.frame_stack={fs}); a DF "
-                                  "model can only be widened to frames that add numbers after its own (e.g. "
-                                  "visual.plan_xy=true from a latent model): start from such a checkpoint, or from "
-                                  "scratch (train.init_from=)")
-        state = widen_frames(state, old, cfg.frame_dim, fs)
-        widened = {"widened_frames": {"from": old, "to": cfg.frame_dim}}
-    provenance = {"path": str(ckpt_dir.relative_to(REPO_ROOT) if ckpt_dir.is_relative_to(REPO_ROOT) else ckpt_dir),
-                  "digest": manifest["digest"], "env": manifest.get("config", {}).get("env", {}).get("name"),
-                  "jump": manifest.get("config", {}).get("jump"), "train_steps": manifest.get("train_steps"),
-                  **lineage(manifest), **widened}
-    return state, provenance
-
-
-def widen_frames(state: dict[str, torch.Tensor], old: int, new: int, frame_stack: int) -> dict[str, torch.Tensor]:
-    """A DF model's weights on frames of ``old`` numbers, for frames of ``new`` > ``old`` whose first ``old``
-    numbers are the old ones (e.g. a visual latent model -> [z, x, y] frames).
-
-    Why: a widened model starts as the trained one instead of from scratch. The added numbers enter
-    with zero input weights and leave with zero output weights (x0_hat = 0, their normalised mean),
-    so at step 0 the old numbers' predictions are exactly the old model's; training then learns the rest.
-    """
-    cols = torch.as_tensor([f * new + j for f in range(frame_stack) for j in range(old)])  # old token -> new token
-    out = dict(state)
-    w_in = state["init_mlp.0.weight"]  # [width, token_dim + t_embed]: the token's numbers first
-    extra = w_in.shape[1] - old * frame_stack
-    wide = torch.zeros(w_in.shape[0], new * frame_stack + extra, dtype=w_in.dtype)
-    wide[:, cols] = w_in[:, :old * frame_stack]
-    wide[:, new * frame_stack:] = w_in[:, old * frame_stack:]
-    out["init_mlp.0.weight"] = wide
-    for key in ("out.weight", "out.bias"):
-        w = state[key]
-        o = torch.zeros((new * frame_stack, *w.shape[1:]), dtype=w.dtype)
-        o[cols] = w
-        out[key] = o
-    return out
-
-
 def model_from_manifest(manifest: dict[str, Any]) -> DFTransformer:
     """An untrained model of the architecture a manifest describes (any model.kind)."""
     saved = manifest["config"]
@@ -539,27 +330,3 @@ def normaliser_from_manifest(manifest: dict[str, Any]) -> Normaliser:
     """The normaliser the model was trained with (the planner must use the same one)."""
     n = manifest["normaliser"]
     return Normaliser.from_lists(n["mean"], n["std"])
-
-
-def save_train_state(ckpt_dir: str | Path, state: dict[str, Any]) -> None:
-    """Write train_state.pt (model + optimiser state, step, RNG states as tensors/plain types)."""
-    ckpt_dir = Path(ckpt_dir)
-    ckpt_dir.mkdir(parents=True, exist_ok=True)
-    atomic_torch_save(state, ckpt_dir / TRAIN_STATE_FILE)
-
-
-def load_train_state(ckpt_dir: str | Path) -> dict[str, Any] | None:
-    """The resumable state in ckpt_dir, or None if there is none."""
-    path = Path(ckpt_dir) / TRAIN_STATE_FILE
-    if not path.exists():
-        return None
-    state = torch_load_weights(path, f"checkpoint {path.parent}", f"delete {path} to restart training from scratch")
-    if not isinstance(state, dict):
-        raise CheckpointError(f"checkpoint {path.parent}: {path.name} is not a training state (a "
-                              f"{type(state).__name__}, not a dict); delete {path} to restart training from scratch")
-    return state
-
-
-def module_state(model: nn.Module) -> dict[str, torch.Tensor]:
-    """state_dict copied to CPU (what every file here stores)."""
-    return {k: v.detach().to("cpu").clone() for k, v in model.state_dict().items()}

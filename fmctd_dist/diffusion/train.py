@@ -26,17 +26,17 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from fmctd_dist.artifacts import module_state
 from fmctd_dist.config import Config, git_sha, resolve_path
 from fmctd_dist.tokens import Normaliser
 from fmctd_dist.device import resolve_device, set_threads, warn_bf16
-from fmctd_dist.diffusion.checkpoint import (
-    check_compatible, lineage, load_checkpoint, load_init_weights, load_train_state, module_state,
-    save_checkpoint, save_train_state,
-)
+from fmctd_dist.diffusion.checkpoint import check_compatible, lineage, load_checkpoint, save_checkpoint
+from fmctd_dist.diffusion.init_from import load_init_weights
 from fmctd_dist.diffusion.model import DFTransformer
 from fmctd_dist.diffusion.models import build_model
 from fmctd_dist.diffusion.schedule import alphas_cumprod, make_betas
-from fmctd_dist.errors import CheckpointError, ConfigError, DatasetError
+from fmctd_dist.errors import ConfigError, DatasetError
+from fmctd_dist.resume import SNAPSHOTS, Clock, check_resume, load_train_state, save_train_state, snapshot_due
 
 CONTEXT_T_MAX = 250  # with prob. 0.5 the context token's timestep is resampled in [0, 250)
 MASKED_WEIGHT = 0.05  # loss weight of tokens past the random terminal (they are pure noise)
@@ -274,17 +274,6 @@ def lr_at(cfg: Config, step: int, wall_s: float = 0.0) -> float:
     return lr * 0.5 * (1.0 + math.cos(math.pi * min(done, 1.0)))
 
 
-def out_of_time(cfg: Config, used_s: float) -> bool:
-    """The run's recorded budget time has reached train.time_budget_s (never, when it is 0)."""
-    return 0 < cfg.train.time_budget_s <= used_s
-
-
-def budget_time(cfg: Config, wall_s: float, cpu_s: float) -> float:
-    """What train.time_budget_s counts: wall seconds, or (train.budget_clock=cpu) this process's CPU
-    seconds, which stay fair between recipe arms when other jobs share the cores (train.threads=1)."""
-    return cpu_s if cfg.train.budget_clock == "cpu" else wall_s
-
-
 @torch.no_grad()
 def validation_loss(model: DFTransformer, loss_fn: DFLoss, batches: list[torch.Tensor], device: torch.device) -> float:
     """Mean loss on fixed batches with fixed noise (same generator seed every call)."""
@@ -319,8 +308,11 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
     ema = copy.deepcopy(model).requires_grad_(False)  # what gets shipped (ema_decay=0: a plain copy)
 
     state = load_train_state(out_dir)
-    if state is not None:
-        _check_resume(state, cfg, data, out_dir)
+    same_data = "regenerate the original dataset"
+    if state is not None:  # the same architecture on the same data
+        check_compatible({"config": state["config"], "n_tokens": state["n_tokens"]}, cfg, out_dir)
+        check_resume(out_dir, "planner", "train.out", {}, {}, data=[("dataset", state["dataset_digest"], data.digest)],
+                     data_fix=same_data)
         model.load_state_dict(state["model"])
         ema.load_state_dict(state.get("ema", state["model"]))  # runs from before EMA start it here
         opt.load_state_dict(state["optimizer"])
@@ -330,17 +322,12 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
         cpu = float(state.get("cpu_time_s", wall))
         init_from = state.get("init_from")
         resumed_from = step
-        if step >= tc.max_steps or out_of_time(cfg, budget_time(cfg, wall, cpu)):
-            return _summary(step, wall, history, out_dir, model, resumed_from)
     elif (out_dir / "manifest.json").exists():
         # A shipped checkpoint (model.pt + manifest, no train_state.pt: that is not committed).
         # Continue from its weights and step with a fresh optimiser rather than overwrite it.
         shipped, manifest = load_checkpoint(out_dir, cfg)
-        if manifest["dataset_digest"] != data.digest:
-            raise CheckpointError(
-                f"{out_dir} holds a model trained on dataset {manifest['dataset_digest']} but the data now has "
-                f"digest {data.digest}; use a fresh train.out dir, or regenerate the original dataset"
-            )
+        check_resume(out_dir, "planner", "train.out", {}, {},
+                     data=[("dataset", manifest["dataset_digest"], data.digest)], data_fix=same_data)
         model.load_state_dict(shipped.state_dict())
         ema.load_state_dict(shipped.state_dict())
         step, wall = int(manifest["train_steps"]), float(manifest["wall_time_s"])
@@ -349,12 +336,13 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
         history = {"val": [list(v) for v in manifest.get("val_history", [])], "train": [],
                    "optimizer_reset_at": [step]}
         resumed_from = step
-        if step >= tc.max_steps or out_of_time(cfg, budget_time(cfg, wall, cpu)):
-            return _summary(step, wall, history, out_dir, model, resumed_from)
     elif tc.init_from:
         weights, init_from = load_init_weights(resolve_path(tc.init_from), cfg)
         model.load_state_dict(weights)
         ema.load_state_dict(weights)
+    done = step >= tc.max_steps or Clock(wall, cpu, tc.budget_clock).over(tc.time_budget_s)
+    if resumed_from is not None and done:  # finished, by steps or by its time budget
+        return _summary(step, wall, history, out_dir, model, resumed_from)
 
     val = [torch.as_tensor(v, dtype=torch.float32, device=device) for v in data.val_batches(tc.val_batches,
                                                                                         tc.batch_size)]
@@ -366,13 +354,14 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
         base["init_from"] = init_from
 
     def save() -> None:
+        wall, cpu = clock.wall_s, clock.cpu_s
         summary = _summary(step, wall, history, out_dir, model, resumed_from)
         fields = {**base, "ema_decay": tc.ema_decay, "config": cfg.to_dict(), "train_steps": step, "wall_time_s": wall,
                   "cpu_time_s": cpu, "vs_paper": vs_paper(cfg, step), "final_losses": summary["final_losses"],
                   "val_history": history["val"]}
         fields.update(lineage(fields))  # steps, CPU time and samples, through every init_from ancestor
         save_checkpoint(out_dir, ema, fields)
-        snap = snapshot_due(out_dir, tc.snapshot_every_s, budget_time(cfg, wall, cpu))
+        snap = snapshot_due(out_dir, tc.snapshot_every_s, cpu if clock.kind == "cpu" else wall)
         if snap is not None:
             save_checkpoint(out_dir / SNAPSHOTS / f"{snap}-step{step:07d}", ema, fields)
         save_train_state(out_dir, {
@@ -385,7 +374,7 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
     model.train()
     bar = tqdm(total=tc.max_steps, initial=step, disable=not progress, desc="train", dynamic_ncols=True)
     running, n_running, t_log = torch.zeros((), device=device), 0, time.perf_counter()
-    t_seg, c_seg = time.perf_counter(), time.process_time()
+    clock = Clock(wall, cpu, tc.budget_clock)
     while step < tc.max_steps:
         x0 = torch.as_tensor(data.sample(rng, tc.batch_size), dtype=torch.float32, device=device)
         if x0.shape[1:] != (cfg.n_tokens, cfg.token_dim):
@@ -394,9 +383,9 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
                 f"({cfg.n_tokens}, {cfg.token_dim}); data.train_window, env.horizon, jump and model.frame_stack "
                 "must describe the same windows"
             )
-        elapsed = budget_time(cfg, wall + time.perf_counter() - t_seg, cpu + time.process_time() - c_seg)
+        lr = lr_at(cfg, step, clock.used())
         for group in opt.param_groups:
-            group["lr"] = lr_at(cfg, step, elapsed)
+            group["lr"] = lr
         with torch.autocast(device.type, dtype=torch.bfloat16, enabled=tc.precision == "bf16"):
             loss = loss_fn(model, x0, gen)
         opt.zero_grad(set_to_none=True)
@@ -406,8 +395,7 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
         step += 1
         running += loss.detach()
         n_running += 1
-        last = step == tc.max_steps or out_of_time(
-            cfg, budget_time(cfg, wall + time.perf_counter() - t_seg, cpu + time.process_time() - c_seg))
+        last = step == tc.max_steps or clock.over(tc.time_budget_s)
         if step % LOG_EVERY == 0 or last:
             mean = float(running) / n_running
             if not np.isfinite(mean):
@@ -420,27 +408,12 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
         if tc.val_every > 0 and (step % tc.val_every == 0 or last):
             history["val"].append([step, validation_loss(ema, loss_fn, val, device)])
         if step % tc.ckpt_every == 0 or last:
-            now, cnow = time.perf_counter(), time.process_time()
-            wall, cpu = wall + now - t_seg, cpu + cnow - c_seg
-            t_seg, c_seg = now, cnow
+            clock.lap()
             save()
         if last:
             break
     bar.close()
-    return _summary(step, wall, history, out_dir, model, resumed_from)
-
-
-SNAPSHOTS = "snapshots"  # <train.out>/snapshots/kNNN-stepSSSSSSS: loadable checkpoint dirs
-
-
-def snapshot_due(out_dir: Path, every_s: float, used_s: float) -> str | None:
-    """The name prefix ``kNNN`` of the snapshot owed at ``used_s`` budget-clock seconds (snapshot N
-    covers N * every_s), or None if that one exists already or none is asked for. Read from the
-    folder, so a resumed run neither repeats nor skips one."""
-    if every_s <= 0 or used_s < every_s:
-        return None
-    k = f"k{int(used_s // every_s):03d}"
-    return None if any((out_dir / SNAPSHOTS).glob(f"{k}-step*")) else k
+    return _summary(step, clock.wall_s, history, out_dir, model, resumed_from)
 
 
 @torch.no_grad()
@@ -451,16 +424,6 @@ def update_ema(ema: torch.nn.Module, model: torch.nn.Module, decay: float, step:
         e.lerp_(p, 1.0 - d)
     for e, b in zip(ema.buffers(), model.buffers()):
         e.copy_(b)
-
-
-def _check_resume(state: dict[str, Any], cfg: Config, data: TrainDataLike, out_dir: Path) -> None:
-    """A resumed run must train the same architecture on the same data."""
-    check_compatible({"config": state["config"], "n_tokens": state["n_tokens"]}, cfg, out_dir)
-    if state["dataset_digest"] != data.digest:
-        raise CheckpointError(
-            f"{out_dir} holds a run trained on dataset {state['dataset_digest']} but the data now has digest "
-            f"{data.digest}; use a fresh train.out dir, or regenerate the original dataset"
-        )
 
 
 def _summary(step: int, wall: float, history: dict, out_dir: Path, model: DFTransformer,

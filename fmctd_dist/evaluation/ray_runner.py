@@ -42,6 +42,7 @@ from ray.exceptions import (
 )
 from tqdm.auto import tqdm
 
+from fmctd_dist.artifacts import first_line
 from fmctd_dist.config import Config, load_config
 from fmctd_dist.denoiser.ray_pool import DenoiserPool, RayDenoiser, auto_actors, unwrap_ray_error
 from fmctd_dist.errors import ConfigError, DeviceError
@@ -140,11 +141,6 @@ def actor_lost(e: BaseException) -> bool:
         cause = getattr(e, "cause", None)
         return isinstance(cause, BaseException) and actor_lost(cause)
     return isinstance(e, LOST)
-
-
-def first_line(e: BaseException) -> str:
-    text = str(e).strip().splitlines()
-    return f"{type(e).__name__}: {text[0][:200] if text else ''}"
 
 
 def episode_pair(p: Prepared, denoisers: list) -> tuple:

@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from fmctd_dist.diffusion.checkpoint import lineage, read_manifest
-from fmctd_dist.diffusion.train import SNAPSHOTS
+from fmctd_dist.resume import SNAPSHOTS
 from fmctd_dist.registry import family
 
 CACHE = "quality.json"

@@ -18,13 +18,11 @@ import torch
 from fmctd_dist.control.policy.network import GoalPolicyNet
 from fmctd_dist.control.policy.spec import PolicySpec
 from fmctd_dist.control.policy.hooks import policy_kinds, spec_for_env
-from fmctd_dist.diffusion.checkpoint import first_line, read_weights_manifest, save_weights, sha256_file
+from fmctd_dist.artifacts import load_weights, read_weights_manifest, save_weights, verify_weights
 from fmctd_dist.errors import CheckpointError
 from fmctd_dist.registry import family
 
 FORMAT_VERSION = 1
-MODEL_FILE = "model.pt"
-MANIFEST_FILE = "manifest.json"
 OTHER_KINDS = {"ant-direction-sac": "the ant expert that makes datasets", "df": "a Diffusion Forcing planner",
                "diffuser": "a Diffuser planner"}
 
@@ -110,22 +108,14 @@ def load_policy(ckpt_dir: str | Path, env_name: str | None = None, obs_dim: int 
     spec = policy_kinds()[manifest["kind"]]
     who = label(spec)
     fix = train_fix(str(manifest.get("env")), ckpt_dir)
-    sha = sha256_file(ckpt_dir / MODEL_FILE)
-    if sha != manifest.get("model_sha256"):
-        raise CheckpointError(
-            f"{who} {ckpt_dir}: {MODEL_FILE} has sha256 {sha[:16]}... but manifest.json records "
-            f"{str(manifest.get('model_sha256'))[:16]}... (corrupt or overwritten); {fix}"
-        )
+    verify_weights(ckpt_dir, manifest, f"{who} {ckpt_dir}", fix)
     feeds = spec.obs_dim if obs_dim is None else obs_dim
     if manifest.get("obs_dim") != feeds:
         raise CheckpointError(
             f"{who} {ckpt_dir} takes obs_dim={manifest.get('obs_dim')} but the caller feeds obs_dim={feeds}; "
             f"{spec.input_layout}"
         )
-    try:
-        cfg = policy_config_from_dict(manifest["config"])
-        net = GoalPolicyNet(list(cfg.policy.hidden), spec.in_dim, spec.act_dim)
-        net.load_state_dict(torch.load(ckpt_dir / MODEL_FILE, map_location="cpu", weights_only=True), strict=True)
-    except Exception as e:  # noqa: BLE001 - any unpickling/shape/config failure means a bad checkpoint
-        raise CheckpointError(f"{who} {ckpt_dir}: {MODEL_FILE} does not load ({first_line(e)}); {fix}") from None
-    return GoalPolicy(net, spec, manifest, ckpt_dir)
+    def build() -> GoalPolicyNet:  # inside load_weights: a config that does not parse is a bad checkpoint too
+        return GoalPolicyNet(list(policy_config_from_dict(manifest["config"]).policy.hidden), spec.in_dim, spec.act_dim)
+
+    return GoalPolicy(load_weights(ckpt_dir, build, f"{who} {ckpt_dir}", fix), spec, manifest, ckpt_dir)

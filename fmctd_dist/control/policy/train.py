@@ -23,14 +23,15 @@ import torch
 from tqdm import tqdm
 
 from fmctd_dist.config import Config, git_sha
-from fmctd_dist.control.policy.checkpoint import MANIFEST_FILE, read_policy_manifest, save_policy
+from fmctd_dist.artifacts import MANIFEST_FILE
+from fmctd_dist.control.policy.checkpoint import read_policy_manifest, save_policy
 from fmctd_dist.control.policy.config import PolicyConfig, policy_dir
 from fmctd_dist.control.policy.hindsight import sample_pairs
 from fmctd_dist.control.policy.hooks import hooks_for_env
 from fmctd_dist.control.policy.network import GoalPolicyNet, build_net
 from fmctd_dist.device import set_threads
-from fmctd_dist.diffusion.checkpoint import load_train_state, save_train_state
 from fmctd_dist.errors import CheckpointError
+from fmctd_dist.resume import Clock, check_resume, load_train_state, save_train_state
 
 BATCH_STREAM, VAL_STREAM, NORM_STREAM = 3, 4, 5  # SeedSequence([policy.seed, stream])
 NORM_ROWS = 65_536  # hindsight pairs whose inputs set the network's input normalisation
@@ -57,27 +58,6 @@ def mse(net: GoalPolicyNet, x: torch.Tensor, y: torch.Tensor, chunk: int = 4096)
     total = sum(float((net(x[k:k + chunk]) - y[k:k + chunk]).square().sum()) for k in range(0, len(x), chunk))
     net.train()
     return total / y.numel()
-
-
-def _get(d: dict[str, Any], dotted: str) -> Any:
-    for part in dotted.split("."):
-        d = d[part]
-    return d
-
-
-def _check_resume(state: dict[str, Any], pcfg: PolicyConfig, env: str, data_sha: dict[str, str], out: Path) -> None:
-    now = pcfg.to_dict()
-    pairs = [(k, _get(state["config"], k), _get(now, k)) for k in RESUME_FIELDS]
-    pairs += [("env", state["env"], env)]
-    for key, have, want in pairs:
-        if have != want:
-            fix = f"set {key}={have!r}" if key != "env" else f"use env={have}"
-            raise CheckpointError(f"{out} holds a policy run with {key}={have!r} but the config has {key}={want!r}; "
-                                  f"{fix} to continue it, or use a fresh policy.out dir")
-    if state["dataset_sha256"] != data_sha:
-        raise CheckpointError(f"{out} was trained on another dataset (train sha256 "
-                              f"{state['dataset_sha256']['train'][:16]}..., now {data_sha['train'][:16]}...); point "
-                              "data.* at the dataset it started on, or use a fresh policy.out dir")
 
 
 def _finished(out: Path) -> dict[str, Any]:
@@ -107,7 +87,10 @@ def train_policy(cfg: Config, pcfg: PolicyConfig, out_dir: str | Path | None = N
                                   "optimiser is gone; train into a fresh policy.out dir (this one is left as it is)")
         return _finished(out)  # finished (e.g. shipped): nothing to do
     if state is not None:
-        _check_resume(state, pcfg, cfg.env.name, data_sha, out)
+        check_resume(out, "policy", "policy.out", {**state["config"], "env": state["env"]},
+                     {**pcfg.to_dict(), "env": cfg.env.name}, RESUME_FIELDS + ("env",),
+                     [(f"{split} sha256", state["dataset_sha256"].get(split), sha) for split, sha in data_sha.items()],
+                     data_fix="point data.* at the dataset it started on")
         if int(state["step"]) >= p.max_steps:
             return _finished(out)
 
@@ -156,8 +139,8 @@ def train_policy(cfg: Config, pcfg: PolicyConfig, out_dir: str | Path | None = N
 
     bar = tqdm(total=p.max_steps, initial=step, disable=not progress, desc=f"policy {cfg.env.name}",
                dynamic_ncols=True)
-    t_seg = t_log = t_call = time.perf_counter()
-    stopped = None
+    clock = Clock(wall)
+    t_log, stopped = clock.started, None
     n_log, loss_sum = 0, 0.0
     net.train()
     while step < p.max_steps:
@@ -184,11 +167,9 @@ def train_policy(cfg: Config, pcfg: PolicyConfig, out_dir: str | Path | None = N
         if step == p.max_steps and pcfg.reach.rows > 0:
             reach = run_reach(cfg, pcfg, hooks, net, val_rows)
         if step % p.ckpt_every == 0 or step == p.max_steps:
-            now = time.perf_counter()
-            wall += now - t_seg
-            t_seg = now
+            now, wall = clock.lap(), clock.wall_s
             save()
-            if p.time_budget_s > 0 and now - t_call >= p.time_budget_s and step < p.max_steps:
+            if p.time_budget_s > 0 and now - clock.started >= p.time_budget_s and step < p.max_steps:  # per call
                 stopped = f"policy.time_budget_s={p.time_budget_s:g} reached at step {step}; rerun to continue"
                 break
     bar.close()

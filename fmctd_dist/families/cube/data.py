@@ -42,7 +42,8 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from fmctd_dist.config import Config, resolve_path
-from fmctd_dist.data.manifest_io import read_manifest_json, sha256_file, split_lines
+from fmctd_dist.artifacts import sha256_file
+from fmctd_dist.data.manifest_io import read_manifest_json, split_lines
 from fmctd_dist.data.npz import save_npz
 from fmctd_dist.data.splits import SPLITS, val_episodes
 from fmctd_dist.tokens import Normaliser

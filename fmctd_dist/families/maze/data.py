@@ -25,9 +25,10 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from fmctd_dist.artifacts import sha256_file
 from fmctd_dist.config import Config, is_ant, resolve_path
 from fmctd_dist.families.maze.ant_data import ANT_GENERATOR_VERSION, AntSource, check_expert_matches
-from fmctd_dist.data.manifest_io import read_manifest_json, sha256_file, split_lines
+from fmctd_dist.data.manifest_io import read_manifest_json, split_lines
 from fmctd_dist.data.npz import load_npz, save_npz
 from fmctd_dist.families.maze.point_data import POINT_GENERATOR_VERSION, PointSource
 from fmctd_dist.data.splits import SPLITS, val_episodes
@@ -36,8 +37,8 @@ from fmctd_dist.errors import DatasetError
 from fmctd_dist.families.maze.record import MAZE_KINDS
 from fmctd_dist.registry import require_family
 
-__all__ = ["SPLITS", "sha256_file", "val_episodes", "dataset_dir", "make_dataset", "load_manifest", "load_dataset",
-           "NavigateDataset", "regenerate_fix"]  # SPLITS, sha256_file: re-exported for families/visual/frame_sets.py
+__all__ = ["SPLITS", "val_episodes", "dataset_dir", "make_dataset", "load_manifest", "load_dataset",
+           "NavigateDataset", "regenerate_fix"]  # SPLITS: re-exported for families/visual/frame_sets.py
 MANIFEST_FIELDS = ("generator_version", "env", "seed", "noise", "episode_steps", "episodes",
                    "sha256", "obs_mean", "obs_std")
 

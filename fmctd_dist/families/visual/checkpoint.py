@@ -16,12 +16,10 @@ from typing import Any
 
 from torch import nn
 
-from fmctd_dist.diffusion.checkpoint import read_weights_manifest, save_weights, sha256_file, torch_load_weights
+from fmctd_dist.artifacts import load_weights, read_weights_manifest, save_weights, verify_weights
 from fmctd_dist.errors import CheckpointError
 
 FORMAT_VERSION = 1
-MODEL_FILE = "model.pt"
-MANIFEST_FILE = "manifest.json"
 KINDS = {"vae": "visual-vae", "estimator": "visual-estimator", "invdyn": "visual-invdyn"}
 WHAT = {"visual-vae": "the visual maze's VAE", "visual-estimator": "the visual maze's position estimator",
         "visual-invdyn": "the visual maze's inverse dynamics", "df": "a Diffusion Forcing planner (state space)",
@@ -66,21 +64,10 @@ def read_part_manifest(ckpt_dir: str | Path, part: str, env: str, latent_dim: in
         raise CheckpointError(f"{name}: vae.digest={m.get('vae', {}).get('digest')!r} but the VAE given is "
                               f"{vae_digest!r}; its latents mean something else: use the {part} trained on this "
                               f"VAE, or {train_fix(part, env)}")
-    sha = sha256_file(ckpt_dir / MODEL_FILE)
-    if sha != m.get("model_sha256"):
-        raise CheckpointError(f"{name}: {MODEL_FILE} has sha256 {sha[:16]}... but the manifest records "
-                              f"{str(m.get('model_sha256'))[:16]}... (corrupt or overwritten); {fix}")
+    verify_weights(ckpt_dir, m, name, fix)
     return m
 
 
 def load_state(ckpt_dir: Path, net: nn.Module, part: str, env: str) -> nn.Module:
     """Load model.pt into ``net`` (strict); a shape or unpickling failure is one CheckpointError."""
-    fix = train_fix(part, env, ckpt_dir)
-    state = torch_load_weights(ckpt_dir / MODEL_FILE, f"visual {part} checkpoint {ckpt_dir}", fix)
-    try:
-        net.load_state_dict(state, strict=True)
-    except Exception as e:  # noqa: BLE001 - missing keys, shapes: a checkpoint of another architecture
-        line = str(e).strip().splitlines()[0][:200] if str(e).strip() else type(e).__name__
-        raise CheckpointError(f"visual {part} checkpoint {ckpt_dir}: {MODEL_FILE} does not fit its manifest's "
-                              f"network ({line}); {fix}") from None
-    return net.eval()
+    return load_weights(ckpt_dir, net, f"visual {part} checkpoint {ckpt_dir}", train_fix(part, env, ckpt_dir))

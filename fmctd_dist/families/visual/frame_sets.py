@@ -30,7 +30,8 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from fmctd_dist.config import REPO_ROOT, Config, resolve_path
-from fmctd_dist.families.maze.data import SPLITS, NavigateDataset, load_dataset, sha256_file
+from fmctd_dist.artifacts import sha256_file
+from fmctd_dist.families.maze.data import SPLITS, NavigateDataset, load_dataset
 from fmctd_dist.data.manifest_io import read_manifest_json
 from fmctd_dist.data.npz import load_npz, save_npz
 from fmctd_dist.families.visual.env import (CAMERA, CAMERA_POS, CAMERA_XYAXES, IMAGE_SIZE, FrameRenderer,

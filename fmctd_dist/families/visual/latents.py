@@ -23,11 +23,11 @@ from typing import Any
 import numpy as np
 from tqdm.auto import tqdm
 
+from fmctd_dist.artifacts import sha256_file
 from fmctd_dist.config import Config, resolve_path
 from fmctd_dist.data.manifest_io import read_manifest_json
 from fmctd_dist.data.npz import load_npz, save_npz
 from fmctd_dist.families.visual.frame_sets import _shown
-from fmctd_dist.diffusion.checkpoint import sha256_file
 from fmctd_dist.errors import DatasetError
 from fmctd_dist.families.visual.config import PartsConfig, part_dir
 from fmctd_dist.families.visual.episodes import load_episode, make_episodes

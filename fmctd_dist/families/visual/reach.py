@@ -85,8 +85,7 @@ def evaluate_reach(cfg: Config, pcfg: PartsConfig, vae: LoadedVAE, invdyn: Loade
 def run_reach(cfg: Config, pcfg: PartsConfig, progress: bool = True) -> dict[str, Any]:
     """Load the VAE, inverse dynamics and latent store of ``cfg``; measure; record under the invdyn's metrics.reach."""
     from fmctd_dist.device import set_threads
-    from fmctd_dist.diffusion.checkpoint import write_manifest
-    from fmctd_dist.families.visual.checkpoint import MANIFEST_FILE
+    from fmctd_dist.artifacts import MANIFEST_FILE, write_manifest
     from fmctd_dist.families.visual.config import part_dir
     from fmctd_dist.families.visual.latents import load_latents, vae_dir
     from fmctd_dist.families.visual.load import load_invdyn, load_vae

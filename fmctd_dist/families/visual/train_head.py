@@ -13,24 +13,23 @@ sampled; the held-out numbers use mu (what the controller sees) and a sampled z.
 
 from __future__ import annotations
 
-import time
 from typing import Any
 
 import numpy as np
 import torch
 from tqdm import tqdm
 
+from fmctd_dist.artifacts import MANIFEST_FILE
 from fmctd_dist.config import Config, git_sha, resolve_path
 from fmctd_dist.device import set_threads
-from fmctd_dist.diffusion.checkpoint import load_train_state, save_train_state
-from fmctd_dist.errors import CheckpointError
-from fmctd_dist.families.visual.checkpoint import MANIFEST_FILE, read_part_manifest, save_part
+from fmctd_dist.families.visual.checkpoint import read_part_manifest, save_part
 from fmctd_dist.families.visual.config import PartsConfig, part_dir
 from fmctd_dist.families.visual.frames import load_frame_set
 from fmctd_dist.families.visual.latents import load_latents, vae_dir
 from fmctd_dist.families.visual.load import LoadedVAE, load_vae
 from fmctd_dist.families.visual.mlp import LatentMLP, build_mlp, triples
 from fmctd_dist.families.visual.vae import encode_frames
+from fmctd_dist.resume import Clock, check_resume, load_train_state, save_train_state
 
 BATCH_STREAM, VAL_STREAM = 41, 42
 POINT_STEP = 0.2  # the point maze moves 0.2 * action per step in open floor (its data: x_{t+1} - x_t = 0.2 a_t)
@@ -97,14 +96,9 @@ def train_head(cfg: Config, pcfg: PartsConfig, part: str, progress: bool = True)
         m = read_part_manifest(out, part, cfg.env.name, vae.latent_dim, vae.digest)
         return {"out_dir": str(out), "step": m["steps"], "wall_time_s": m["wall_time_s"], **m["metrics"]}
     if state is not None:
-        for key in RESUME_FIELDS:
-            if state["config"][key] != getattr(h, key):
-                raise CheckpointError(f"{out} holds a {part} run with {part}.{key}={state['config'][key]!r} but the "
-                                      f"config has {getattr(h, key)!r}; set it back to continue, or use a fresh "
-                                      f"{part}.out")
-        if state["vae_digest"] != vae.digest:
-            raise CheckpointError(f"{out} holds a {part} run on VAE {state['vae_digest']} but the VAE is {vae.digest}; "
-                                  f"use a fresh {part}.out")
+        check_resume(out, part, f"{part}.out", {part: state["config"]}, {part: pcfg.to_dict()[part]},
+                     [f"{part}.{k}" for k in RESUME_FIELDS], [("VAE", state["vae_digest"], vae.digest)],
+                     f"set {part}.vae to the VAE it started on")
     d = head_data(cfg, pcfg, part, vae)
     window = 1 if part == "estimator" else 3
     net = build_mlp(window * vae.latent_dim, 2, h.hidden, h.seed)
@@ -146,13 +140,10 @@ def train_head(cfg: Config, pcfg: PartsConfig, part: str, progress: bool = True)
                                "step": step, "wall_time_s": wall, "history": hist, "config": pcfg.to_dict()[part],
                                "vae_digest": vae.digest})
 
-    def over_budget() -> bool:
-        return h.time_budget_s > 0 and wall + (time.perf_counter() - t_seg) >= h.time_budget_s
-
     bar = tqdm(total=h.max_steps, initial=step, disable=not progress, desc=f"{part} {cfg.env.name}", dynamic_ncols=True)
-    t_seg = time.perf_counter()
+    clock = Clock(wall)
     n_log, loss_sum = 0, 0.0
-    stop = step >= h.max_steps or over_budget()
+    stop = step >= h.max_steps or clock.over(h.time_budget_s)
     final = metrics()
     while not stop:
         i = rng.integers(0, len(d["y"]), size=h.batch_size)
@@ -163,7 +154,7 @@ def train_head(cfg: Config, pcfg: PartsConfig, part: str, progress: bool = True)
         opt.step()
         step += 1
         n_log, loss_sum = n_log + 1, loss_sum + float(loss.detach())
-        stop = step >= h.max_steps or over_budget()
+        stop = step >= h.max_steps or clock.over(h.time_budget_s)
         if step % h.log_every == 0 or stop:
             hist["train"].append([step, loss_sum / n_log])
             post = {"loss": f"{loss_sum / n_log:.4f}"}
@@ -176,9 +167,8 @@ def train_head(cfg: Config, pcfg: PartsConfig, part: str, progress: bool = True)
             final = metrics()
             hist["val"].append([step, final["val_rmse"] if part == "estimator" else final["val_mse"]])
         if step % h.ckpt_every == 0 or stop:
-            now = time.perf_counter()
-            wall += now - t_seg
-            t_seg = now
+            clock.lap()
+            wall = clock.wall_s
             save(final)
     bar.close()
     return {"out_dir": str(out), "step": step, "wall_time_s": wall, **final}

@@ -12,21 +12,20 @@ runs together, so a CPU budget is a config value, not a killed process.
 from __future__ import annotations
 
 import time
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch
 from tqdm import tqdm
 
+from fmctd_dist.artifacts import MANIFEST_FILE
 from fmctd_dist.config import Config, git_sha
 from fmctd_dist.device import set_threads
-from fmctd_dist.diffusion.checkpoint import load_train_state, save_train_state
-from fmctd_dist.errors import CheckpointError
-from fmctd_dist.families.visual.checkpoint import MANIFEST_FILE, read_part_manifest, save_part
+from fmctd_dist.families.visual.checkpoint import read_part_manifest, save_part
 from fmctd_dist.families.visual.config import PartsConfig, part_dir
 from fmctd_dist.families.visual.frames import FrameSet, load_frame_set
 from fmctd_dist.families.visual.vae import ConvVAE, encode_frames, psnr, recon_mse, vae_loss
+from fmctd_dist.resume import Clock, check_resume, load_train_state, save_train_state
 
 BATCH_STREAM, NOISE_SEED_OFFSET = 31, 1_000_003
 RESUME_FIELDS = ("latent_dim", "channels", "kl_weight", "batch_size", "seed")
@@ -47,22 +46,6 @@ def linear_probe(z_train: np.ndarray, xy_train: np.ndarray, z_val: np.ndarray, x
     return float(np.sqrt(np.mean(np.sum((pred - xy_val) ** 2, axis=-1))))
 
 
-def _check_resume(state: dict[str, Any], pcfg: PartsConfig, env: str, frames_sha: str, out: Path) -> None:
-    v = pcfg.vae
-    for key in RESUME_FIELDS:
-        have, want = state["config"][key], getattr(v, key)
-        if have != want:
-            raise CheckpointError(f"{out} holds a VAE run with vae.{key}={have!r} but the config has "
-                                  f"vae.{key}={want!r}; set vae.{key}={have!r} to continue it, or use a fresh vae.out")
-    if state["env"] != env:
-        raise CheckpointError(f"{out} holds a VAE run of env={state['env']} but env={env}; use env={state['env']} "
-                              "to continue it, or a fresh vae.out")
-    if state["frames_sha256"] != frames_sha:
-        raise CheckpointError(f"{out} was trained on other frames (sha256 {state['frames_sha256'][:16]}..., now "
-                              f"{frames_sha[:16]}...); set visual.frames / visual.frames_seed as they were, or use "
-                              "a fresh vae.out")
-
-
 def train_vae(cfg: Config, pcfg: PartsConfig, progress: bool = True, frames: FrameSet | None = None
               ) -> dict[str, Any]:
     """Train (or resume) the VAE into vae.out; returns the manifest's summary."""
@@ -71,11 +54,15 @@ def train_vae(cfg: Config, pcfg: PartsConfig, progress: bool = True, frames: Fra
     out = part_dir(cfg, v.out, "vae")
     fs = frames or load_frame_set(cfg)
     state = load_train_state(out)
-    if state is None and (out / MANIFEST_FILE).exists():
-        m = read_part_manifest(out, "vae", cfg.env.name)
-        return {"out_dir": str(out), "step": m["steps"], "wall_time_s": m["wall_time_s"], **m["metrics"]}
     if state is not None:
-        _check_resume(state, pcfg, cfg.env.name, fs.sha256, out)
+        check_resume(out, "VAE", "vae.out", {"vae": state["config"], "env": state["env"]},
+                     {"vae": pcfg.to_dict()["vae"], "env": cfg.env.name}, [f"vae.{k}" for k in RESUME_FIELDS] + ["env"],
+                     [("frames", state["frames_sha256"], fs.sha256)],
+                     "set visual.frames / visual.frames_seed as they were")
+    if (out / MANIFEST_FILE).exists() and (state is None or int(state["step"]) >= v.max_steps
+                                           or Clock(state["wall_time_s"]).over(v.time_budget_s)):
+        m = read_part_manifest(out, "vae", cfg.env.name)  # finished earlier (budget or steps): nothing to do
+        return {"out_dir": str(out), "step": m["steps"], "wall_time_s": m["wall_time_s"], **m["metrics"]}
 
     net = build_vae(v.latent_dim, v.channels, v.seed)
     opt = torch.optim.Adam(net.parameters(), lr=v.lr)
@@ -110,19 +97,13 @@ def train_vae(cfg: Config, pcfg: PartsConfig, progress: bool = True, frames: Fra
                                "gen": gen.get_state(), "step": step, "wall_time_s": wall, "history": hist,
                                "config": pcfg.to_dict()["vae"], "env": cfg.env.name, "frames_sha256": fs.sha256})
 
-    def over_budget() -> bool:
-        return v.time_budget_s > 0 and wall + (time.perf_counter() - t_seg) >= v.time_budget_s
-
     bar = tqdm(total=v.max_steps, initial=step, disable=not progress, desc=f"vae {cfg.env.name}", dynamic_ncols=True)
-    t_seg = t_log = time.perf_counter()
+    clock = Clock(wall)
+    t_log = clock.started
     n_log, mse_sum, kl_sum = 0, 0.0, 0.0
     images = torch.from_numpy(fs.train_images)
     net.train()
-    stop = step >= v.max_steps or over_budget()
-    if stop and (out / MANIFEST_FILE).exists():  # finished earlier (budget or steps): nothing to do
-        bar.close()
-        m = read_part_manifest(out, "vae", cfg.env.name)
-        return {"out_dir": str(out), "step": m["steps"], "wall_time_s": m["wall_time_s"], **m["metrics"]}
+    stop = step >= v.max_steps or clock.over(v.time_budget_s)
     while not stop:
         idx = rng.integers(0, len(images), size=v.batch_size)
         loss, mse, kl = vae_loss(net, images[idx], v.kl_weight, gen)
@@ -131,7 +112,7 @@ def train_vae(cfg: Config, pcfg: PartsConfig, progress: bool = True, frames: Fra
         opt.step()
         step += 1
         n_log, mse_sum, kl_sum = n_log + 1, mse_sum + float(mse.detach()), kl_sum + float(kl.detach())
-        stop = step >= v.max_steps or over_budget()
+        stop = step >= v.max_steps or clock.over(v.time_budget_s)
         if step % v.log_every == 0 or stop:
             now = time.perf_counter()
             hist["train"].append([step, mse_sum / n_log, kl_sum / n_log])
@@ -151,9 +132,8 @@ def train_vae(cfg: Config, pcfg: PartsConfig, progress: bool = True, frames: Fra
             probe["val_linear_xy_rmse"] = linear_probe(z_tr, fs.train_xy, z_va, fs.val_xy)
             net.train()
         if step % v.ckpt_every == 0 or stop:
-            now = time.perf_counter()
-            wall += now - t_seg
-            t_seg = now
+            clock.lap()
+            wall = clock.wall_s
             save()
     bar.close()
     return {"out_dir": str(out), "step": step, "wall_time_s": wall, **metrics()}

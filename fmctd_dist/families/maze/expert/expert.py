@@ -20,11 +20,9 @@ import torch
 from fmctd_dist.families.maze.expert.config import DEFAULT_OUT, expert_config_from_dict
 from fmctd_dist.families.maze.expert.direction_env import ACT_DIM, OBS_DIM, PROPRIO_DIM
 from fmctd_dist.families.maze.expert.sac import Actor
-from fmctd_dist.diffusion.checkpoint import first_line, read_weights_manifest, save_weights, sha256_file
+from fmctd_dist.artifacts import load_weights, read_weights_manifest, save_weights, verify_weights
 from fmctd_dist.errors import CheckpointError
 
-MODEL_FILE = "model.pt"
-MANIFEST_FILE = "manifest.json"
 KIND = "ant-direction-sac"
 FORMAT_VERSION = 1
 OBS_LAYOUT = (f"[{OBS_DIM}] = OGBench ant qpos[2:] + qvel ({PROPRIO_DIM}, the 29-D ant observation without x, y) "
@@ -90,12 +88,8 @@ def load_expert(ckpt_dir: str | Path, obs_dim: int = OBS_DIM, act_dim: int = ACT
     """Verify and load an expert. ``obs_dim``/``act_dim``: what the caller will feed and expects back."""
     ckpt_dir = Path(ckpt_dir)
     manifest = read_expert_manifest(ckpt_dir)
-    sha = sha256_file(ckpt_dir / MODEL_FILE)
-    if sha != manifest.get("model_sha256"):
-        raise CheckpointError(
-            f"ant expert {ckpt_dir}: {MODEL_FILE} has sha256 {sha[:16]}... but manifest.json records "
-            f"{str(manifest.get('model_sha256'))[:16]}... (corrupt or overwritten); {train_fix(ckpt_dir, broken=True)}"
-        )
+    where, fix = f"ant expert {ckpt_dir}", train_fix(ckpt_dir, broken=True)
+    verify_weights(ckpt_dir, manifest, where, fix)
     for name, have, want in (("obs_dim", manifest.get("obs_dim"), obs_dim),
                              ("act_dim", manifest.get("act_dim"), act_dim)):
         if have != want:
@@ -103,11 +97,9 @@ def load_expert(ckpt_dir: str | Path, obs_dim: int = OBS_DIM, act_dim: int = ACT
                 f"ant expert {ckpt_dir} was trained with {name}={have} but the caller asks for {name}={want}; "
                 f"the expert's input is {OBS_LAYOUT}"
             )
-    try:
-        cfg = expert_config_from_dict(manifest["config"])
-        actor = Actor(manifest["obs_dim"], manifest["act_dim"], list(cfg.sac.hidden))
-        actor.load_state_dict(torch.load(ckpt_dir / MODEL_FILE, map_location="cpu", weights_only=True), strict=True)
-    except Exception as e:  # noqa: BLE001 - any unpickling/shape/config failure means a bad checkpoint
-        raise CheckpointError(f"ant expert {ckpt_dir}: {MODEL_FILE} does not load ({first_line(e)}); "
-                              f"{train_fix(ckpt_dir, broken=True)}") from None
-    return AntExpert(actor, manifest, ckpt_dir)
+
+    def build() -> Actor:  # inside load_weights: a config that does not parse is a bad checkpoint too
+        hidden = list(expert_config_from_dict(manifest["config"]).sac.hidden)
+        return Actor(manifest["obs_dim"], manifest["act_dim"], hidden)
+
+    return AntExpert(load_weights(ckpt_dir, build, where, fix), manifest, ckpt_dir)

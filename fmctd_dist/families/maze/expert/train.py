@@ -21,33 +21,18 @@ from fmctd_dist.families.maze.expert.config import AntExpertConfig
 from fmctd_dist.config import git_sha
 from fmctd_dist.families.maze.expert.direction_env import ACT_DIM, OBS_DIM, AntDirectionEnv
 from fmctd_dist.families.maze.expert.evaluate import evaluate_directions, make_eval_env
-from fmctd_dist.families.maze.expert.expert import MANIFEST_FILE, read_expert_manifest, save_expert
+from fmctd_dist.artifacts import MANIFEST_FILE
+from fmctd_dist.families.maze.expert.expert import read_expert_manifest, save_expert
 from fmctd_dist.families.maze.expert.sac import SAC, ReplayBuffer
 from fmctd_dist.device import set_threads
-from fmctd_dist.diffusion.checkpoint import load_train_state, save_train_state
 from fmctd_dist.errors import CheckpointError
+from fmctd_dist.resume import Clock, check_resume, load_train_state, save_train_state
 
 RNG_STREAM = 2  # SeedSequence([seed, RNG_STREAM]): random warm-up actions and replay indices
 RECENT = 20  # episodes in the progress bar's running means
 # Fields a resumed run must share with the saved one (everything else may change between runs).
 RESUME_FIELDS = ("expert.seed", "sac.hidden", "env.episode_steps", "env.resample_every", "env.healthy_reward",
                  "env.ctrl_cost", "env.reset_noise")
-
-
-def _get(d: dict[str, Any], dotted: str) -> Any:
-    for part in dotted.split("."):
-        d = d[part]
-    return d
-
-
-def _check_resume(saved: dict[str, Any], cfg: AntExpertConfig, out_dir: Path) -> None:
-    now = cfg.to_dict()
-    for key in RESUME_FIELDS:
-        if _get(saved, key) != _get(now, key):
-            raise CheckpointError(
-                f"{out_dir} holds a run with {key}={_get(saved, key)!r} but the config has {key}={_get(now, key)!r}; "
-                f"set {key}={_get(saved, key)!r} to continue it, or use a fresh expert.out dir"
-            )
 
 
 def train_expert(cfg: AntExpertConfig, out_dir: str | Path | None = None, progress: bool = True) -> dict[str, Any]:
@@ -66,7 +51,7 @@ def train_expert(cfg: AntExpertConfig, out_dir: str | Path | None = None, progre
 
     state = load_train_state(out_dir)
     if state is not None:
-        _check_resume(state["config"], cfg, out_dir)
+        check_resume(out_dir, "ant expert", "expert.out", state["config"], cfg.to_dict(), RESUME_FIELDS)
         agent.load_state_dict(state["agent"])
         buffer.load_state_dict(state["buffer"])
         rng.bit_generator.state = state["numpy_rng"]
@@ -106,7 +91,8 @@ def train_expert(cfg: AntExpertConfig, out_dir: str | Path | None = None, progre
         })
 
     bar = tqdm(total=ec.max_steps, initial=step, disable=not progress, desc="ant expert", dynamic_ncols=True)
-    t_seg = t_log = time.perf_counter()
+    clock = Clock(wall)
+    t_log = clock.started
     n_log, last_update = 0, None
     while step < ec.max_steps:
         if step < ec.start_steps:
@@ -138,9 +124,8 @@ def train_expert(cfg: AntExpertConfig, out_dir: str | Path | None = None, progre
         if (cfg.eval.every > 0 and step % cfg.eval.every == 0) or step == ec.max_steps:
             evaluate()
         if step % ec.ckpt_every == 0 or step == ec.max_steps:
-            now = time.perf_counter()
-            wall += now - t_seg
-            t_seg = now
+            clock.lap()
+            wall = clock.wall_s
             save()
     bar.close()
     env.close()

@@ -1,0 +1,105 @@
+"""Resumable training, written once for the five loops (planner, low-level policy, ant expert, VAE, heads).
+
+Each loop saves ``train_state.pt`` (its networks, optimisers, RNG states, step, clock and history, and
+what it was trained on) at every checkpoint; rerunning the same command loads it, checks that the
+config and the data are the ones it was saved with (:func:`check_resume`: one CheckpointError naming
+the field otherwise) and continues, bitwise the uninterrupted run where the loop's RNGs allow. The
+budget :class:`Clock` counts wall or CPU seconds over all runs of one out dir, and
+:func:`snapshot_due` keeps a copy of the weights every ``snapshot_every_s`` of it. What a step does,
+and what a finished or shipped dir means, stays in each loop.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any, Iterable
+
+from fmctd_dist.artifacts import atomic_torch_save, torch_load_weights
+from fmctd_dist.errors import CheckpointError
+from fmctd_dist.hints import word
+
+TRAIN_STATE_FILE = "train_state.pt"
+SNAPSHOTS = "snapshots"  # <out>/snapshots/kNNN-stepSSSSSSS: loadable checkpoint dirs
+
+
+def save_train_state(out_dir: str | Path, state: dict[str, Any]) -> None:
+    """Write train_state.pt atomically (tensors and plain types only: it loads with weights_only=True)."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    atomic_torch_save(state, out_dir / TRAIN_STATE_FILE)
+
+
+def load_train_state(out_dir: str | Path) -> dict[str, Any] | None:
+    """The resumable state in out_dir, or None if there is none."""
+    path = Path(out_dir) / TRAIN_STATE_FILE
+    if not path.exists():
+        return None
+    state = torch_load_weights(path, f"checkpoint {path.parent}", f"delete {path} to restart training from scratch")
+    if not isinstance(state, dict):
+        raise CheckpointError(f"checkpoint {path.parent}: {path.name} is not a training state (a "
+                              f"{type(state).__name__}, not a dict); delete {path} to restart training from scratch")
+    return state
+
+
+def check_resume(out: Path, what: str, fresh: str, saved: dict[str, Any], now: dict[str, Any],
+                 keys: Iterable[str] = (), data: Iterable[tuple[str, Any, Any]] = (),
+                 data_fix: str = "use the data it started on") -> None:
+    """A resumed run trains what the saved one trained, on the same data, or one CheckpointError.
+
+    ``keys``: dotted config keys whose ``saved`` and ``now`` values must agree (fixed by setting the key
+    back); ``data``: (what, saved digest, digest now), fixed by ``data_fix``; ``fresh``: the out dir's key.
+    """
+    for key in keys:
+        have, want = _get(saved, key), _get(now, key)
+        if have != want:
+            raise CheckpointError(f"{out} holds a {what} run with {key}={have!r} but the config has {key}={want!r}; "
+                                  f"set {word(key, have)} to continue it, or use a fresh {fresh} dir")
+    for name, have, want in data:
+        if have != want:
+            raise CheckpointError(f"{out} holds a {what} run trained on {name} {str(have)[:16]} but it is now "
+                                  f"{str(want)[:16]}; {data_fix}, or use a fresh {fresh} dir")
+
+
+def _get(d: dict[str, Any], dotted: str) -> Any:
+    for part in dotted.split("."):
+        d = d[part]
+    return d
+
+
+class Clock:
+    """A run's training time over all its runs: wall and CPU seconds, the segment since the last save folded
+    in by :meth:`lap`. ``kind`` picks what a time budget counts: ``cpu`` stays fair between runs when other
+    jobs share the cores (with one thread)."""
+
+    def __init__(self, wall_s: float = 0.0, cpu_s: float = 0.0, kind: str = "wall"):
+        self.wall_s, self.cpu_s, self.kind = float(wall_s), float(cpu_s), kind
+        self.started = self._t = time.perf_counter()  # this call's start (a per-call budget reads it)
+        self._c = time.process_time()
+
+    def used(self) -> float:
+        """Budget seconds so far, the current segment included."""
+        if self.kind == "cpu":
+            return self.cpu_s + time.process_time() - self._c
+        return self.wall_s + time.perf_counter() - self._t
+
+    def over(self, budget_s: float) -> bool:
+        """The budget (0: none) is used up."""
+        return 0 < budget_s <= self.used()
+
+    def lap(self) -> float:
+        """Fold the segment since the last lap into wall_s / cpu_s (at a save) -> the wall clock now."""
+        now, cnow = time.perf_counter(), time.process_time()
+        self.wall_s, self.cpu_s = self.wall_s + now - self._t, self.cpu_s + cnow - self._c
+        self._t, self._c = now, cnow
+        return now
+
+
+def snapshot_due(out_dir: Path, every_s: float, used_s: float) -> str | None:
+    """The name prefix ``kNNN`` of the snapshot owed at ``used_s`` budget-clock seconds (snapshot N
+    covers N * every_s), or None if that one exists already or none is asked for. Read from the
+    folder, so a resumed run neither repeats nor skips one."""
+    if every_s <= 0 or used_s < every_s:
+        return None
+    k = f"k{int(used_s // every_s):03d}"
+    return None if any((out_dir / SNAPSHOTS).glob(f"{k}-step*")) else k
