@@ -16,7 +16,8 @@ from fmctd_dist.config import REPO_ROOT, Config, Range, config_from_dict, field_
 from fmctd_dist.errors import ConfigError, ResultsError
 from fmctd_dist.evaluation.grid import Prepared, missing, provenance
 from fmctd_dist.evaluation.identity import CONFIG_SCHEMA, config_hash, plan_fields
-from fmctd_dist.evaluation.report import maze_table
+from fmctd_dist.evaluation.report import paper_table
+from fmctd_dist.registry import tables
 from fmctd_dist.evaluation.results import ResultStore, markdown_table, summarise
 
 GOLDEN_DEFAULTS = Path(__file__).parent / "golden" / "config_defaults.json"
@@ -197,7 +198,7 @@ def test_tables_never_average_different_configs():
     summary = summarise(rows)
     assert sorted(s["success"] for s in summary) == [0.0, 100.0]
     assert all(s["variant"].startswith("config ") for s in summary)
-    for table in (markdown_table(summary), maze_table(rows)):
+    for table in (markdown_table(summary), paper_table(rows, tables()["maze"])):
         assert table.count("| fast-mctd [config ") == 2 and "| 50 ± 0 |" not in table
 
 

@@ -239,6 +239,8 @@ class EvalConfig:
     # torch threads of an in-process denoiser (runner=local, bench_speed); 0 = torch default.
     # Set 1 when other jobs share the cores: 2 spinning threads on a busy 2-core machine run 10x slower.
     threads: int = spec(0, ge=0, why=THREADS)
+    # episodes planned at once, their trees' denoiser jobs pooled into shared micro-batches (rows do not change)
+    in_flight: int = spec(1, ge=1, why="episodes in flight per runner (local) or per denoiser actor (ray); 1 = one")
 
 
 @dataclass
