@@ -35,6 +35,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from fmctd_dist.checkpoint_index import write_index
+from fmctd_dist.families import hooks_for
 from fmctd_dist.cli import run
 from fmctd_dist.config import REPO_ROOT, Config, load_config, resolve_path
 from fmctd_dist.families.maze.geometry import maze_geometry
@@ -83,7 +84,7 @@ def main(argv: list[str]) -> int:
     if "--checkpoints" in argv:
         if len(argv) > 1:
             raise ConfigError("report: --checkpoints takes no other argument (it rewrites checkpoints/README.md only)")
-        print(f"wrote {write_index().relative_to(REPO_ROOT)}")
+        print(f"wrote {write_index(hooks_for).relative_to(REPO_ROOT)}")
         return 0
     opts = parse(argv)
     root, doc, figures = resolve_path(opts["results"]), resolve_path(opts["doc"]), resolve_path(opts["figures"])
@@ -161,7 +162,7 @@ def main(argv: list[str]) -> int:
     for name, body in sections.items():
         print(f"## {name}\n{body}\n")
     if doc == resolve_path("docs/results.md"):  # the project's docs, not a copy elsewhere (tests write to tmp)
-        print(f"wrote {write_index().relative_to(REPO_ROOT)}")
+        print(f"wrote {write_index(hooks_for).relative_to(REPO_ROOT)}")
         if "glance" in sections:  # the README shows the same glance table
             readme = REPO_ROOT / "README.md"
             readme.write_text(fill_markers(readme.read_text(), {"glance": sections["glance"]}))

@@ -14,7 +14,7 @@ from fmctd_dist.families.cube.scripts import ABOVE, EFFECTOR, PrePosition, Relea
 from fmctd_dist.families.cube.env import CubeEpisodes
 from fmctd_dist.errors import CheckpointError, ConfigError
 from fmctd_dist.families.cube.failures import DROPPED, KNOCKED, PLANNING_TIME_OUT, TIME_OUT, WRONG_CUBE, why_failed
-from fmctd_dist.family import hooks_for
+from fmctd_dist.families import hooks_for
 from fmctd_dist.search.actions import scale_actions
 from fmctd_dist.search.loop import SearchParams, search
 from fmctd_dist.search.value_rule import MazeValue
@@ -183,7 +183,7 @@ def tiny_double(tmp_path_factory):
     from fmctd_dist.control.policy.checkpoint import save_policy
     from fmctd_dist.families.cube.policy import CUBE_SPEC
     from fmctd_dist.control.policy.network import GoalPolicyNet
-    from fmctd_dist.data.registry import load_family_dataset, make_family_dataset
+    from fmctd_dist.families import load_dataset, make_dataset
     from fmctd_dist.data.windows import train_data
     from fmctd_dist.diffusion.train import train
 
@@ -192,10 +192,10 @@ def tiny_double(tmp_path_factory):
             f"env.policy={root / 'policy'}"]
     cfg = load_config(args + ["train.max_steps=2", "train.batch_size=4", "train.val_batches=1", "train.warmup=1"],
                       method="mctd")
-    make_family_dataset(cfg, progress=False)
+    make_dataset(cfg, progress=False)
     torch.manual_seed(0)
     with torch.random.fork_rng():
-        train(cfg, train_data(cfg, load_family_dataset(cfg)), root / "ckpt", progress=False)
+        train(cfg, train_data(cfg, load_dataset(cfg)), root / "ckpt", progress=False)
     pcfg = PolicyConfig()
     pcfg.policy.hidden = [16]
     net = GoalPolicyNet([16], CUBE_SPEC.in_dim, CUBE_SPEC.act_dim)
@@ -288,7 +288,7 @@ def tiny_double_dense(tiny_double, tmp_path_factory):
     Diffusion Forcing load by default (their configs say jump=1; the cube value's warp is then env.warp_dense)."""
     import torch
 
-    from fmctd_dist.data.registry import load_family_dataset
+    from fmctd_dist.families import load_dataset
     from fmctd_dist.data.windows import train_data
     from fmctd_dist.diffusion.train import train
 
@@ -298,7 +298,7 @@ def tiny_double_dense(tiny_double, tmp_path_factory):
                               "train.warmup=1"], method="mctd")
     torch.manual_seed(0)
     with torch.random.fork_rng():
-        train(cfg, train_data(cfg, load_family_dataset(cfg)), root / "ckpt", progress=False)
+        train(cfg, train_data(cfg, load_dataset(cfg)), root / "ckpt", progress=False)
     return args
 
 

@@ -86,7 +86,7 @@ def test_shipped_diffuser_without_its_edge_frames_is_one_clear_error():
 def test_replanning_search_with_the_shipped_cube_model_and_policy_solves_cube_single_task1_seed0(method):
     """Issue 20's smoke test: the shipped cube-single-h5 (Fast-MCTD-Replan) or dense cube-single-h1 (MCTD-Replan)
     model + the shipped cube policy, in process."""
-    from fmctd_dist.family import hooks_for
+    from fmctd_dist.families import hooks_for
 
     cfg = load_config([f"method={method}", "env=cube-single"])
     model, manifest = load_checkpoint(cfg.checkpoint_dir(), cfg)

@@ -133,7 +133,7 @@ def test_a_widened_model_plans_an_episode_and_configs_must_match_it(tmp_path):
     from fmctd_dist.denoiser.local import LocalDenoiser
     from fmctd_dist.diffusion.checkpoint import normaliser_from_manifest, read_manifest
     from fmctd_dist.diffusion.train import train
-    from fmctd_dist.family import hooks_for
+    from fmctd_dist.families import hooks_for
     from fmctd_dist.planners import make_planner
 
     out = tmp_path / "xy-h5"
@@ -176,7 +176,7 @@ def test_fast_mctd_with_the_shipped_xy_model_solves_task3_seed0():
     smoke test, it does not solve (it solves task 1 seeds 1, 5 and 6)."""
     from fmctd_dist.denoiser.local import LocalDenoiser
     from fmctd_dist.diffusion.checkpoint import normaliser_from_manifest, read_manifest
-    from fmctd_dist.family import hooks_for
+    from fmctd_dist.families import hooks_for
     from fmctd_dist.planners import make_planner
 
     cfg = load_config([f"env={MEDIUM}", "method=fast-mctd", "visual.episodes=100", "visual.plan_xy=true",
@@ -192,7 +192,7 @@ def test_an_xy_model_of_another_estimator_is_one_clear_error(tmp_path):
     """A [z, x, y] planner whose frames carry another estimator's (x, y) than the one loaded: refused by name."""
     import shutil
 
-    from fmctd_dist.family import hooks_for
+    from fmctd_dist.families import hooks_for
 
     other = tmp_path / "xy-other"
     shutil.copytree(XY, other)

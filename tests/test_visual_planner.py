@@ -89,7 +89,7 @@ def test_position_readout_reads_latent_frames_as_the_estimator_does():
 def test_visual_env_trains_and_evaluates_now():
     """The visual family is no longer refused by train / eval; a maze-only part still names the visual code."""
     from fmctd_dist.families.maze.geometry import maze_geometry
-    from fmctd_dist.family import hooks_for
+    from fmctd_dist.families import hooks_for
 
     assert load_config([f"env={MEDIUM}"]).env.name == MEDIUM
     assert hooks_for(MEDIUM).__name__ == "fmctd_dist.families.visual.hooks"
@@ -196,7 +196,7 @@ def _copy_planner(tmp_path: Path, **edits) -> Path:
 @needs_shipped
 def test_bad_inputs_are_one_clear_error_each(tmp_path):
     """Checked by the hooks in the job process (grid.prepare calls check_episodes first): one error each."""
-    from fmctd_dist.family import hooks_for
+    from fmctd_dist.families import hooks_for
 
     hooks = hooks_for(MEDIUM)
     cfg = load_config([f"env={MEDIUM}", "jump=5"])
@@ -239,7 +239,7 @@ def test_fast_mctd_solves_task1_seed0_with_the_shipped_models():
     """
     from fmctd_dist.denoiser.local import LocalDenoiser
     from fmctd_dist.diffusion.checkpoint import normaliser_from_manifest, read_manifest
-    from fmctd_dist.family import hooks_for
+    from fmctd_dist.families import hooks_for
     from fmctd_dist.planners import make_planner
 
     cfg = load_config([f"env={MEDIUM}", "method=fast-mctd", "env.warp_sparse=8.0"])

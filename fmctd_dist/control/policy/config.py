@@ -19,7 +19,7 @@ from omegaconf import OmegaConf
 
 from fmctd_dist.config import ALIASES, GROUPS, Config, all_keys, apply_override, load_config, merge_checked, \
     resolve_path
-from fmctd_dist.control.policy.hooks import spec_for_env
+from fmctd_dist.control.policy.spec import require_policy
 from fmctd_dist.errors import ConfigError, did_you_mean
 
 PREFIXES = ("policy.", "reach.")
@@ -104,7 +104,7 @@ def load_policy_args(args: list[str] | None = None) -> tuple[Config, PolicyConfi
             raise ConfigError(f"unknown config key {key!r}{did_you_mean(key, known + pkeys)}")
         cfg_words.append(arg)
     cfg = load_config(cfg_words, env="antmaze-medium", method="mctd")  # cube: no planner yet
-    spec = spec_for_env(cfg.env.name)  # a point maze: one ConfigError (it has the PD controller)
+    spec = require_policy(cfg.env.name)  # a point maze: one ConfigError (it has the PD controller)
     pcfg = OmegaConf.structured(PolicyConfig)
     for key, value in [*FAMILY_DEFAULTS.get(spec.family, {}).items(), *pwords]:
         pcfg = apply_override(pcfg, key, str(value), PolicyConfig())
