@@ -18,7 +18,7 @@ import numpy as np
 import torch
 
 from fmctd_dist.control.policy.network import GoalPolicyNet
-from fmctd_dist.control.policy.spec import PolicySpec
+from fmctd_dist.control.policy.spec import PolicySpec, require_policy
 from fmctd_dist.diffusion.checkpoint import first_line, read_weights_manifest, save_weights, sha256_file
 from fmctd_dist.errors import CheckpointError
 from fmctd_dist.registry import env_specs, family
@@ -55,6 +55,8 @@ def read_policy_manifest(ckpt_dir: str | Path, spec: PolicySpec, env_name: str |
     With ``env_name`` the policy must have been trained on that very env, unless the family's policy
     serves all its envs (cubes) and it was trained on one of them.
     """
+    if env_name is not None:
+        require_policy(env_name)  # a point maze: one ConfigError (it has the PD controller)
     ckpt_dir = Path(ckpt_dir)
     who = label(spec.family)
     fix = train_fix(env_name or "<env>", ckpt_dir)
@@ -93,8 +95,8 @@ class GoalPolicy:
     def act(self, obs: np.ndarray, subgoal: np.ndarray) -> np.ndarray:
         obs, subgoal = np.asarray(obs), np.asarray(subgoal)
         if obs.shape[-1:] != (self.spec.obs_dim,) or subgoal.shape[-1:] != (self.spec.goal_dim,):
-            raise ValueError(f"{label(self.spec.family)} {self.where}: got obs {obs.shape} and subgoal {subgoal.shape}; "
-                             f"{self.spec.input_layout}")
+            raise ValueError(f"{label(self.spec.family)} {self.where}: got obs {obs.shape} and subgoal "
+                             f"{subgoal.shape}; {self.spec.input_layout}")
         x = torch.from_numpy(self.spec.make_input(obs, subgoal, self.max_dist))
         with torch.no_grad():
             return self.net(x).numpy().astype(np.float64)
