@@ -23,6 +23,7 @@ from typing import Any
 
 from fmctd_dist.config import REPO_ROOT, Config, group_names, is_ant, load_config, resolve_path
 from fmctd_dist.errors import ConfigError, FmctdError
+from fmctd_dist.family import HooksFor
 
 CHECKPOINTS = REPO_ROOT / "checkpoints"
 INDEX_FILE = "README.md"
@@ -70,8 +71,9 @@ def _configs() -> list[tuple[str, Config | None]]:
     return out
 
 
-def config_readers(absent: dict[str, str] | None = None) -> dict[str, list[str]]:
-    """Checkpoint dir name -> the configs that read it (``env=E method=M [words]: how``, how = eval | data.expert).
+def config_readers(hooks_for: HooksFor, absent: dict[str, str] | None = None) -> dict[str, list[str]]:
+    """Checkpoint dir name -> the configs that read it (``env=E method=M [words]: how``, how = eval | data.expert);
+    ``hooks_for``: env name -> its family's hook module (``fmctd_dist.families.hooks_for``).
 
     A config whose eval checks fail because its planner checkpoint is not there goes to ``absent`` (dir name ->
     the config), when given; any other failure of those checks is raised: a shipped config must pass them."""
@@ -82,7 +84,7 @@ def config_readers(absent: dict[str, str] | None = None) -> dict[str, list[str]]
         if cfg is None:
             continue
         try:
-            names = [p.removeprefix("checkpoints/") for p in checkpoints_read(cfg)]
+            names = [p.removeprefix("checkpoints/") for p in checkpoints_read(cfg, hooks_for)]
         except FmctdError:
             if cfg.checkpoint_dir().exists():
                 raise
@@ -254,18 +256,16 @@ def render(table: list[dict[str, Any]], absent: dict[str, str] | None = None) ->
     return "\n".join(lines)
 
 
-def checkpoint_index(root: Path = CHECKPOINTS, readers: dict[str, list[str]] | None = None,
-                     absent: dict[str, str] | None = None) -> str:
+def checkpoint_index(root: Path, readers: dict[str, list[str]], absent: dict[str, str]) -> str:
     """checkpoints/README.md's text for the dirs under ``root`` today; ``readers`` and ``absent`` as
-    :func:`config_readers` fills them (computed here when not given: ~150 configs' checks, half a minute)."""
-    if readers is None:
-        absent = {}
-        readers = config_readers(absent)
-    return render(rows(root, readers), {name: f"`{words}`" for name, words in (absent or {}).items()})
+    :func:`config_readers` fills them."""
+    return render(rows(root, readers), {name: f"`{words}`" for name, words in absent.items()})
 
 
-def write_index(root: Path = CHECKPOINTS) -> Path:
-    """Write ``root``/README.md; returns its path."""
+def write_index(hooks_for: HooksFor, root: Path = CHECKPOINTS) -> Path:
+    """Write ``root``/README.md (~150 configs' checks, half a minute); returns its path."""
+    absent: dict[str, str] = {}
+    readers = config_readers(hooks_for, absent)
     path = root / INDEX_FILE
-    path.write_text(checkpoint_index(root))
+    path.write_text(checkpoint_index(root, readers, absent))
     return path

@@ -1,38 +1,34 @@
-"""What a planner and an evaluation runner ask of an env family, in one place per family (docs/design.md §13).
+"""What a planner and an evaluation runner ask of an env family (docs/design.md §13): the protocol, no lookup.
 
 A family differs in the tree's action set and plan value (mazes: guidance scales + the reach
 value; cubes: (unsolved cube, scale) pairs + the cube rules) and in how an episode is driven
-(PD or ant policy on waypoints; the arm's pre-defined plans + the cube policy). Planners,
-``evaluation/grid.py`` and ``evaluation/ray_runner.py`` ask :func:`hooks_for` and never branch
-on the family. The module of each family is named in its registry record (:mod:`fmctd_dist.registry`) and
-imported by name, so nothing below the hooks imports them.
+(PD or ant policy on waypoints; the arm's pre-defined plans + the cube policy). Planners and
+``evaluation/`` never branch on the family: their caller hands them what the family's hook module
+gives (its plan rules, episodes, guide map). The one place that finds that module from an env name
+is the door above every family, :mod:`fmctd_dist.families`; this module sits below the search and
+planners, so it names their types in words only.
 """
 
 from __future__ import annotations
 
-import importlib
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Any, Callable, Protocol
 
 import numpy as np
 
-from fmctd_dist.registry import family_record
-
 if TYPE_CHECKING:
     from fmctd_dist.config import Config
-    from fmctd_dist.planners.base import Planner
-    from fmctd_dist.search.actions import Actions
-    from fmctd_dist.search.value_rule import PlanValue
 
 
 class PlanRules(Protocol):
     """The search's inputs that depend on the family, for one plan call from ``start`` to ``goal`` [d]."""
 
-    def tree(self, start: np.ndarray, goal: np.ndarray) -> tuple["Actions", "PlanValue"]:
-        """The tree's child slots and the plan value (MCTD family)."""
+    def tree(self, start: np.ndarray, goal: np.ndarray) -> tuple[Any, Any]:
+        """The tree's child slots and the plan value (``search.actions.Actions``, ``search.value_rule.PlanValue``;
+        MCTD family)."""
         ...
 
-    def fixed(self, start: np.ndarray, goal: np.ndarray) -> tuple["Actions", "PlanValue"]:
+    def fixed(self, start: np.ndarray, goal: np.ndarray) -> tuple[Any, Any]:
         """One action (the fixed guidance of Diffuser / Diffusion Forcing) and the rule whose ``prepare``
         turns the sampled plan into the one the controller follows."""
         ...
@@ -43,10 +39,16 @@ class Episodes(Protocol):
 
     policy_digest: str  # digest of the low-level policy it loaded ("" when the robot has none)
 
-    def run(self, planner: "Planner", task: int, seed: int) -> dict[str, Any]: ...
+    def run(self, planner: Any, task: int, seed: int) -> dict[str, Any]:
+        """One episode driven by ``planner`` (``planners.base.Planner``): its row."""
+        ...
 
 
 class FamilyHooks(Protocol):
+    """A family's hook module. Optional: ``guide_map(cfg, manifest) -> torch module`` (the visual maze: latent
+    -> estimated (x, y)), the space the denoiser's guidance measures distances in; mazes and cubes guide on
+    the state itself."""
+
     def plan_rules(self, cfg: "Config") -> PlanRules: ...
 
     def check_episodes(self, cfg: "Config") -> str:
@@ -62,15 +64,7 @@ class FamilyHooks(Protocol):
         ...
 
 
-def guide_map_for(cfg: "Config", manifest: dict[str, Any]) -> Any:
-    """The module the family's guidance measures distances through (``diffusion.sampler.goal_reward``), or None.
-
-    Optional per family: a hook module may define ``guide_map(cfg, manifest) -> torch module``
-    (the visual maze: latent -> estimated (x, y)); mazes and cubes do not, and guide on the state itself.
-    The denoiser asks this once, when it loads the planner checkpoint whose ``manifest`` is given.
-    """
-    fn = getattr(hooks_for(cfg.env.name), "guide_map", None)
-    return None if fn is None else fn(cfg, manifest)
+HooksFor = Callable[[str], FamilyHooks]  # env name -> its family's hook module: fmctd_dist.families.hooks_for
 
 
 def warp_threshold(cfg: "Config") -> float:
@@ -79,8 +73,3 @@ def warp_threshold(cfg: "Config") -> float:
     ``method.warp_threshold`` (0 = unset)."""
     w = cfg.env.warp_dense if cfg.jump == 1 else cfg.env.warp_sparse
     return float(w or cfg.method.warp_threshold)
-
-
-def hooks_for(env_name: str) -> FamilyHooks:
-    """The hook module of ``env_name``'s family (an unknown name: one ConfigError)."""
-    return importlib.import_module(family_record(env_name).hooks)  # type: ignore[return-value]

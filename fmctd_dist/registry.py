@@ -5,9 +5,8 @@ one) whose ``record`` module holds a :class:`Family`: its env names and planner 
 modules that implement its hooks (plan rules, episodes, figures), its data (make / load / describe)
 and, per robot, its learned low-level policy. :data:`FAMILIES` maps a family's name to that module;
 adding a family is adding its package, one line here, and its env configs. Record modules are light
-(names and small specs only), so config, data and the jobs read them without import cycles; the
-core (search, denoiser, diffusion, planners, evaluation) asks :mod:`fmctd_dist.family` and never
-names a family.
+(names and small specs only), so config, data and the jobs read them without import cycles; only the
+door :mod:`fmctd_dist.families` imports the modules a record names.
 
 Code written for some families only guards its entry with :func:`require_family`, so a name from
 another family stops there with one ConfigError naming what to run instead.

@@ -31,6 +31,7 @@ from fmctd_dist.diffusion.checkpoint import normaliser_from_manifest, read_manif
 from fmctd_dist.diffusion.schedule import PyramidSchedule
 from fmctd_dist.families.maze.geometry import maze_geometry
 from fmctd_dist.evaluation.grid import prepare
+from fmctd_dist.families import hooks_for
 from fmctd_dist.planners import make_planner
 
 
@@ -76,7 +77,7 @@ def plan_stats(p, denoiser, repeats: int, n_actors: int = 1) -> dict:
     cfg = p.cfg
     task = maze_geometry(cfg.env.name).tasks[0]
     timed = Timed(denoiser)
-    planner = make_planner(cfg, timed, normaliser_from_manifest(read_manifest(p.checkpoint)))
+    planner = make_planner(cfg, timed, normaliser_from_manifest(read_manifest(p.checkpoint)), p.plan_rules(cfg))
     planner.plan(task.init_xy, task.goal_xy, 0)  # warm-up
     timed.wall_s = timed.model_s = 0.0
     times, out = [], None
@@ -97,7 +98,7 @@ def main(argv: list[str]) -> None:
     ap.add_argument("--batch", type=int, default=0, help="jobs in the throughput batch (default method.parallel)")
     args, overrides = ap.parse_known_args(argv)
     cfg = load_config(overrides)
-    p = prepare(cfg)
+    p = prepare(cfg, hooks_for)
     cores = os.cpu_count() or 1
     actors = [int(a) for a in args.actors.split(",")] if args.actors else list(range(1, cores + 1))
     threads = max(1, int(cfg.ray.num_cpus))
@@ -109,7 +110,7 @@ def main(argv: list[str]) -> None:
     from fmctd_dist.denoiser.ray_pool import DenoiserPool
     from fmctd_dist.evaluation.ray_runner import check_ray_config, connect
 
-    local = LocalDenoiser.from_checkpoint(p.checkpoint, cfg, expect_digest=p.checkpoint_digest)
+    local = LocalDenoiser.from_checkpoint(p.checkpoint, cfg, expect_digest=p.checkpoint_digest, guide_map=p.guide_map)
     rows = [("in-process (no Ray)", throughput(local, batch, args.repeats), plan_stats(p, local, args.repeats))]
     check_ray_config(p)
     started = connect(cfg.ray.address)

@@ -17,7 +17,7 @@ command run again resumes: episodes the store holds are read back, not re-run.
 
 For each method (default: mctd, p-mctd, s-mctd, fast-mctd, diffuser) every episode is run in this
 process with a LocalDenoiser on that method's checkpoint, interleaved per episode so load
-on the machine hits all methods alike; the episode is the env family's (``hooks_for(env).episodes``:
+on the machine hits all methods alike; the episode is the env family's (``families.hooks_for(env).episodes``:
 mazes with their PD or ant controller, cubes with the arm's scripts and policy). Prints success,
 mean planning time, the share of planning time inside the denoiser, and planning-time ratios
 against Fast-MCTD (``fast-mctd``, else ``fast-mctd-replan``, else the last method) — ratios, not
@@ -41,7 +41,7 @@ from fmctd_dist.diffusion.checkpoint import load_checkpoint, normaliser_from_man
 from fmctd_dist.evaluation.results import describe
 from fmctd_dist.evaluation.grid import missing, prepare, provenance, same_policy
 from fmctd_dist.evaluation.results import ResultStore
-from fmctd_dist.family import hooks_for
+from fmctd_dist.families import hooks_for
 from fmctd_dist.planners import make_planner
 
 DEFAULT_METHODS = ["mctd", "p-mctd", "s-mctd", "fast-mctd", "diffuser"]
@@ -55,10 +55,12 @@ def reference(methods: list[str]) -> str:
 def build(spec: str, overrides: list[str]):
     method, _, options = spec.partition("+")
     cfg = load_config(overrides + [f"method={method}"] + (option_overrides(options) if options else []))
-    prepared = prepare(cfg)  # device, checkpoint present and uncorrupted
+    prepared = prepare(cfg, hooks_for)  # device, checkpoint present and uncorrupted
     model, manifest = load_checkpoint(prepared.checkpoint, cfg)
     denoiser = LocalDenoiser(model, cfg.diffusion, cfg.device, cfg.ray.micro_batch, manifest["digest"])
-    return cfg, make_planner(cfg, denoiser, normaliser_from_manifest(manifest), cfg.eval.episode_time_limit), prepared
+    planner = make_planner(cfg, denoiser, normaliser_from_manifest(manifest), prepared.plan_rules(cfg),
+                           cfg.eval.episode_time_limit)
+    return cfg, planner, prepared
 
 
 def main(argv: list[str]) -> int:
@@ -88,7 +90,7 @@ def main(argv: list[str]) -> int:
     set_threads(cfg0.eval.threads)
     episodes = {}  # per method: the family's env + controller (a method may set env.* or its policy)
     for m, (cfg, _, prepared) in setups.items():
-        episodes[m] = hooks_for(cfg.env.name).episodes(cfg)
+        episodes[m] = prepared.episodes(cfg)
         same_policy(prepared, episodes[m])
     for m, (cfg, planner, _) in setups.items():  # compilation is a one-off cost, not planning time
         if cfg.diffusion.compile:

@@ -17,13 +17,13 @@ from fmctd_dist.config import load_config
 from fmctd_dist.evaluation.grid import prepare, run_local
 from fmctd_dist.evaluation.plots import plot_success_vs_time
 from fmctd_dist.evaluation.results import ResultStore, markdown_table, summarise
-from fmctd_dist.family import hooks_for
+from fmctd_dist.families import hooks_for
 
 
 def main(argv: list[str]) -> int:
     t0 = time.time()
     cfg = load_config(argv)
-    prepared = prepare(cfg)  # config, device, checkpoint: all checked here
+    prepared = prepare(cfg, hooks_for)  # config, device, checkpoint: all checked here
     store = ResultStore(cfg.eval.out, cfg.eval.run)
     if cfg.eval.runner == "local":
         run_local(prepared, store)

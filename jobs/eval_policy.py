@@ -22,15 +22,15 @@ import time
 from fmctd_dist.cli import run
 from fmctd_dist.control.policy.checkpoint import load_policy
 from fmctd_dist.control.policy.config import load_policy_args, policy_dir
-from fmctd_dist.control.policy.hooks import hooks_for_env
 from fmctd_dist.device import set_threads
+from fmctd_dist.families import policy_hooks
 
 
 def main(argv: list[str]) -> int:
     cfg, pcfg = load_policy_args(argv)
     set_threads(pcfg.policy.threads)
-    policy = load_policy(policy_dir(cfg, pcfg), env_name=cfg.env.name)
-    hooks = hooks_for_env(cfg.env.name)
+    hooks = policy_hooks(cfg.env.name)
+    policy = load_policy(policy_dir(cfg, pcfg), hooks.spec, env_name=cfg.env.name)
     _, val, _ = hooks.load(cfg, pcfg)
     r = pcfg.reach
     t0 = time.time()

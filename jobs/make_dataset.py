@@ -16,16 +16,16 @@ import time
 
 from fmctd_dist.cli import run
 from fmctd_dist.config import load_config
-from fmctd_dist.data.registry import describe_family_dataset, make_family_dataset
+from fmctd_dist.families import data_module, make_dataset
 
 
 def main(argv: list[str]) -> int:
     t0 = time.time()
     cfg = load_config(argv, method="mctd")
-    path, manifest = make_family_dataset(cfg)  # the family's own data (its registry record names the module)
+    path, manifest = make_dataset(cfg)  # the family's own data (its registry record names the module)
     action = "generated" if "_generation_s" in manifest else "verified existing"
     print(f"{action} {path} in {time.time() - t0:.1f}s")
-    for line in describe_family_dataset(cfg.env.name, manifest):
+    for line in data_module(cfg.env.name).describe(manifest):
         print(line)
     return 0
 

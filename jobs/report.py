@@ -36,13 +36,13 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from fmctd_dist.checkpoint_index import write_index
+from fmctd_dist.families import hooks_for
 from fmctd_dist.cli import run
 from fmctd_dist.config import REPO_ROOT, Config, load_config, resolve_path
 from fmctd_dist.evaluation.identity import config_hash
 from fmctd_dist.evaluation.plots import plot_ablation, plot_success_vs_time
 from fmctd_dist.evaluation.report import ABLATIONS, ablation_summary, ablation_table, current_rows, fill_markers, \
     glance_table, load_rows, merge_rows, paper_table, row_key, superseded
-from fmctd_dist.family import hooks_for
 from fmctd_dist.registry import tables
 from fmctd_dist.evaluation.results import markdown_table, summarise
 from fmctd_dist.errors import ConfigError
@@ -83,7 +83,7 @@ def main(argv: list[str]) -> int:
     if "--checkpoints" in argv:
         if len(argv) > 1:
             raise ConfigError("report: --checkpoints takes no other argument (it rewrites checkpoints/README.md only)")
-        print(f"wrote {write_index().relative_to(REPO_ROOT)}")
+        print(f"wrote {write_index(hooks_for).relative_to(REPO_ROOT)}")
         return 0
     opts = parse(argv)
     root, doc, figures = resolve_path(opts["results"]), resolve_path(opts["doc"]), resolve_path(opts["figures"])
@@ -161,7 +161,7 @@ def main(argv: list[str]) -> int:
     for name, body in sections.items():
         print(f"## {name}\n{body}\n")
     if doc == resolve_path("docs/results.md"):  # the project's docs, not a copy elsewhere (tests write to tmp)
-        print(f"wrote {write_index().relative_to(REPO_ROOT)}")
+        print(f"wrote {write_index(hooks_for).relative_to(REPO_ROOT)}")
         if "glance" in sections:  # the README shows the same glance table
             readme = REPO_ROOT / "README.md"
             readme.write_text(fill_markers(readme.read_text(), {"glance": sections["glance"]}))

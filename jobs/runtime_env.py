@@ -15,12 +15,13 @@ import sys
 from fmctd_dist.cli import run
 from fmctd_dist.config import REPO_ROOT, load_config
 from fmctd_dist.evaluation.job_upload import runtime_env, upload_bytes
+from fmctd_dist.families import hooks_for
 
 
 def main(argv: list[str]) -> int:
     size = "--size" in argv
     cfg = load_config([a for a in argv if a != "--size"])
-    env = runtime_env(cfg)
+    env = runtime_env(cfg, hooks_for)
     print(json.dumps(env))
     if size:
         print(f"upload: {upload_bytes(REPO_ROOT, env) / 2**20:.1f} MiB (Ray's limit: 100 MiB)", file=sys.stderr)

@@ -17,9 +17,9 @@ import time
 
 from fmctd_dist.cli import run
 from fmctd_dist.config import load_config, resolve_path
-from fmctd_dist.data.registry import load_family_dataset, make_family_dataset
 from fmctd_dist.data.windows import train_data
 from fmctd_dist.device import resolve_device
+from fmctd_dist.families import load_dataset, make_dataset
 from fmctd_dist.diffusion.train import train
 
 
@@ -28,8 +28,8 @@ def main(argv: list[str]) -> int:
     # dense (jump=1) unless jump=... is given; cube models are trained before the cube planner exists
     cfg = load_config(argv, method=method)
     resolve_device(cfg.device)  # a missing GPU fails here, before any work
-    make_family_dataset(cfg)
-    data = train_data(cfg, load_family_dataset(cfg))
+    make_dataset(cfg)
+    data = train_data(cfg, load_dataset(cfg))
     out = resolve_path(cfg.train.out or f"runs/{cfg.run_name}")
     t0 = time.time()
     summary = train(cfg, data, out)

@@ -22,16 +22,16 @@ import time
 
 from fmctd_dist.cli import run
 from fmctd_dist.control.policy.config import load_policy_args, policy_dir
-from fmctd_dist.control.policy.hooks import hooks_for_env
 from fmctd_dist.control.policy.train import train_policy
+from fmctd_dist.families import policy_hooks
 
 
 def main(argv: list[str]) -> int:
     cfg, pcfg = load_policy_args(argv)
-    hooks = hooks_for_env(cfg.env.name)
+    hooks = policy_hooks(cfg.env.name)
     out = policy_dir(cfg, pcfg)
     t0 = time.time()
-    s = train_policy(cfg, pcfg, out)
+    s = train_policy(cfg, pcfg, hooks, out)
     rows = s["rows"]["train"]
     extra = ""
     if "fallen_rows" in rows:

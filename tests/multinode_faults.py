@@ -47,6 +47,7 @@ from ray.cluster_utils import Cluster  # noqa: E402
 
 import fmctd_dist.evaluation.ray_runner as rr  # noqa: E402
 from fmctd_dist.denoiser.ray_pool import DenoiserPool  # noqa: E402
+from fmctd_dist.families import hooks_for  # noqa: E402
 
 ARGS = json.loads(sys.argv[1])
 
@@ -115,7 +116,7 @@ def wait_rows(run: str, n: int, timeout: float = 120.0) -> bool:
 
 def evaluate(run: str) -> float:
     t0 = time.monotonic()
-    rr.evaluate(ARGS["words"] + [f"eval.out={OUT}", f"eval.run={run}"], progress=False)
+    rr.evaluate(ARGS["words"] + [f"eval.out={OUT}", f"eval.run={run}"], hooks_for, progress=False)
     return time.monotonic() - t0
 
 
@@ -139,7 +140,7 @@ def main() -> None:
     from fmctd_dist.evaluation.results import ResultStore
 
     cfg = load_config(ARGS["words"] + [f"eval.out={OUT}", "eval.run=ref", "runner=local", "eval.threads=1"])
-    run_local(prepare(cfg), ResultStore(cfg.eval.out, cfg.eval.run), progress=False, log=lambda s: None)
+    run_local(prepare(cfg, hooks_for), ResultStore(cfg.eval.out, cfg.eval.run), progress=False, log=lambda s: None)
     report["ref_s"] = round(time.monotonic() - t0, 1)
     report["ref"] = rows_of("ref")
 

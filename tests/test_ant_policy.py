@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 import torch
 
-from fmctd_dist.families.maze.ant_policy import NAME, policy_input
+from fmctd_dist.families.maze.ant_policy import ANT_SPEC, NAME, policy_input
+from fmctd_dist.families.maze.ant_policy_hooks import AntHooks
 from fmctd_dist.families.maze.ant_policy_rows import make_rows, run_ends
 from fmctd_dist.artifacts import MODEL_FILE
 from fmctd_dist.control.policy.checkpoint import load_policy
@@ -56,7 +57,7 @@ def trained(data_root, tmp_path_factory):
     """A 30-step policy run, trained once for the module."""
     out = tmp_path_factory.mktemp("policy")
     with torch_threads(1):  # train_policy sets policy.threads=1; give the old count back after
-        summary = train_policy(*tiny(data_root, 30), out, progress=False)
+        summary = train_policy(*tiny(data_root, 30), AntHooks(), out, progress=False)
     return out, summary
 
 
@@ -140,7 +141,7 @@ def test_checkpoint_round_trip_loads_with_weights_only_and_acts_identically(trai
     out, _ = trained
     state = torch.load(out / MODEL_FILE, map_location="cpu", weights_only=True)
     assert state["net.0.weight"].shape == (32, 29) and "in_mean" in state
-    a, b = load_policy(out, env_name="antmaze-medium"), load_policy(out)
+    a, b = load_policy(out, ANT_SPEC, env_name="antmaze-medium"), load_policy(out, ANT_SPEC)
     rng = np.random.default_rng(0)
     obs, sub = rng.normal(size=(7, 29)), rng.normal(size=(7, 2))
     act = a.act(obs, sub)
@@ -156,32 +157,32 @@ def test_checkpoint_round_trip_loads_with_weights_only_and_acts_identically(trai
 def test_rerun_resumes_bit_exactly(data_root, trained, tmp_path):
     straight, _ = trained
     killed = tmp_path / "killed"
-    train_policy(*tiny(data_root, 20, "reach.rows=0"), killed, progress=False)  # "killed" after step 20
-    s = train_policy(*tiny(data_root, 30), killed, progress=False)
+    train_policy(*tiny(data_root, 20, "reach.rows=0"), AntHooks(), killed, progress=False)  # "killed" after step 20
+    s = train_policy(*tiny(data_root, 30), AntHooks(), killed, progress=False)
     assert s["step"] == 30 and s["resumed_from"] == 20
     a, b = load_train_state(straight), load_train_state(killed)
     assert all(torch.equal(v, b["net"][k]) for k, v in a["net"].items())
     assert a["history"] == b["history"] and a["rng"] == b["rng"]
     assert all(torch.equal(a["opt"]["state"][k]["exp_avg"], b["opt"]["state"][k]["exp_avg"]) for k in a["opt"]["state"])
     assert (straight / MODEL_FILE).read_bytes() == (killed / MODEL_FILE).read_bytes()
-    again = train_policy(*tiny(data_root, 30), killed, progress=False)  # finished: nothing to do
+    again = train_policy(*tiny(data_root, 30), AntHooks(), killed, progress=False)  # finished: nothing to do
     assert again["step"] == 30 and again["resumed_from"] == 30 and again["reach"] is not None
 
 
 def test_clear_errors_for_missing_wrong_or_mismatched_policies(data_root, trained, tmp_path):
     out, _ = trained
     with pytest.raises(CheckpointError, match="does not exist.*jobs/train_policy.py env=antmaze-medium"):
-        load_policy(tmp_path / "nowhere", env_name="antmaze-medium")
+        load_policy(tmp_path / "nowhere", ANT_SPEC, env_name="antmaze-medium")
     with pytest.raises(CheckpointError, match="kind 'df' \\(a Diffusion Forcing planner\\), not a goal-conditioned"):
-        load_policy(REPO_ROOT / "checkpoints" / "pointmaze-medium-h5", env_name="antmaze-medium")
+        load_policy(REPO_ROOT / "checkpoints" / "pointmaze-medium-h5", ANT_SPEC, env_name="antmaze-medium")
     with pytest.raises(CheckpointError, match="kind 'ant-direction-sac' \\(the ant expert"):
-        load_policy(REPO_ROOT / "checkpoints" / "ant-expert")
+        load_policy(REPO_ROOT / "checkpoints" / "ant-expert", ANT_SPEC)
     with pytest.raises(CheckpointError, match="trained on antmaze-medium data but the env is antmaze-large.*"
                                               "env=antmaze-large"):
-        load_policy(out, env_name="antmaze-large")
+        load_policy(out, ANT_SPEC, env_name="antmaze-large")
     with pytest.raises(CheckpointError, match="takes obs_dim=29 but the caller feeds obs_dim=27"):
-        load_policy(out, obs_dim=27)
-    policy = load_policy(out)
+        load_policy(out, ANT_SPEC, obs_dim=27)
+    policy = load_policy(out, ANT_SPEC)
     with pytest.raises(ValueError, match=r"full OGBench ant observation.*x and y first"):
         policy.act(np.zeros(27), np.zeros(2))  # x, y already dropped
     with pytest.raises(ValueError, match=r"subgoal \(3,\)"):
@@ -191,16 +192,16 @@ def test_clear_errors_for_missing_wrong_or_mismatched_policies(data_root, traine
     with open(corrupt / MODEL_FILE, "ab") as f:
         f.write(b"x")
     with pytest.raises(CheckpointError, match="sha256.*corrupt"):
-        load_policy(corrupt)
+        load_policy(corrupt, ANT_SPEC)
     resumed = tmp_path / "resume"
     shutil.copytree(out, resumed)
     with pytest.raises(CheckpointError, match=r"policy.hidden=\[32, 32\].*policy.hidden=\[64, 64\]"):
-        train_policy(*tiny(data_root, 40, "policy.hidden=[64,64]"), resumed, progress=False)
+        train_policy(*tiny(data_root, 40, "policy.hidden=[64,64]"), AntHooks(), resumed, progress=False)
     os.remove(resumed / "train_state.pt")
     with pytest.raises(CheckpointError, match="without train_state.pt"):
-        train_policy(*tiny(data_root, 40), resumed, progress=False)
+        train_policy(*tiny(data_root, 40), AntHooks(), resumed, progress=False)
     with pytest.raises(CheckpointError, match="kind 'ant-direction-sac'"):  # never trains into another checkpoint
-        train_policy(*tiny(data_root, 40), REPO_ROOT / "checkpoints" / "ant-expert", progress=False)
+        train_policy(*tiny(data_root, 40), AntHooks(), REPO_ROOT / "checkpoints" / "ant-expert", progress=False)
     with pytest.raises(ConfigError, match="did you mean 'policy.max_steps'"):
         load_policy_args(["policy.max_step=10"])
     with pytest.raises(ConfigError, match="policy.geom_p=0.0 must be in"):
@@ -304,7 +305,7 @@ def test_controller_drives_the_real_ant_with_the_trained_policy(trained):
     out, _ = trained
     env = AntMaze("antmaze-medium")
     env.reset(1, seed=0)
-    run = run_plan(env, PLAN, load_policy(out, env_name="antmaze-medium"), max_steps=5)
+    run = run_plan(env, PLAN, load_policy(out, ANT_SPEC, env_name="antmaze-medium"), max_steps=5)
     assert run.steps == 5 and run.positions.shape == (6, 2) and run.subgoal_index in (10, 20)
     env.close()
 

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from fmctd_dist.config import REPO_ROOT, load_config
+from fmctd_dist.families import hooks_for
 from fmctd_dist.families.maze.data import dataset_dir, load_dataset, make_dataset
 from fmctd_dist.errors import CheckpointError, ConfigError, DatasetError
 
@@ -189,11 +190,11 @@ def test_antmaze_evaluation_without_a_policy_fails_before_anything_starts(tmp_pa
     missing = tmp_path / "no-policy"
     cfg = load_config(["env=antmaze-medium", "runner=local", "tasks=[1]", "seeds=[0]", f"env.policy={missing}"])
     with pytest.raises(CheckpointError, match=r"env.policy=.*no-policy \(the ant's low-level policy"):
-        prepare(cfg)
+        prepare(cfg, hooks_for)
     # a planner checkpoint is not a policy: one clear error naming what it is
     cfg = load_config(["env=antmaze-medium", "env.policy=checkpoints/pointmaze-medium-h5"])
     with pytest.raises(CheckpointError, match="not a goal-conditioned ant policy"):
-        prepare(cfg)
+        prepare(cfg, hooks_for)
     out = subprocess.run([sys.executable, str(REPO_ROOT / "jobs" / "eval.py"), "env=antmaze-medium",
                           f"env.policy={missing}"], capture_output=True, text=True, timeout=120)
     assert out.returncode == 2

@@ -5,6 +5,7 @@ import numpy as np
 from fmctd_dist.config import load_config
 from fmctd_dist.denoiser.local import LocalDenoiser
 from fmctd_dist.diffusion.checkpoint import load_checkpoint, normaliser_from_manifest
+from fmctd_dist.families import plan_rules
 from fmctd_dist.families.maze.make import make_env
 from fmctd_dist.families.maze.episode import run_episode
 from fmctd_dist.planners import PlanOutput, make_planner
@@ -38,7 +39,7 @@ def test_diffusion_forcing_planner(tiny_checkpoint, one_torch_thread):
     cfg = load_config(args + ["method=diffusion-forcing"])  # args hold jump=1
     model, manifest = load_checkpoint(ckpt, cfg)
     denoiser = LocalDenoiser(model, cfg.diffusion, "cpu", micro_batch=4)
-    planner = make_planner(cfg, denoiser, normaliser_from_manifest(manifest))
+    planner = make_planner(cfg, denoiser, normaliser_from_manifest(manifest), plan_rules(cfg))
     assert isinstance(planner, DiffusionForcingPlanner)
     a = planner.plan(np.zeros(2), np.array([20.0, 20.0]), seed=3)
     b = planner.plan(np.zeros(2), np.array([20.0, 20.0]), seed=3)

@@ -10,13 +10,14 @@ import pytest
 from fmctd_dist.checkpoint_index import CHECKPOINTS, INDEX_FILE, PURPOSES, checkpoint_index, config_readers, rows
 from fmctd_dist.config import REPO_ROOT
 from fmctd_dist.errors import ConfigError
+from fmctd_dist.families import hooks_for
 
 
 @pytest.fixture(scope="module")
 def found() -> tuple[dict[str, list[str]], dict[str, str]]:
     """config_readers() once for the module (every config's eval checks: half a minute): readers, absent."""
     absent: dict[str, str] = {}
-    return config_readers(absent), absent
+    return config_readers(hooks_for, absent), absent
 
 
 @pytest.fixture(scope="module")

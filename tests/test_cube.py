@@ -272,7 +272,7 @@ def test_train_and_load_a_cube_model(tiny_cube, tmp_path, param):
     and is refused, by name, for a maze env."""
     import torch
 
-    from fmctd_dist.data.registry import load_family_dataset, make_family_dataset
+    from fmctd_dist.families import load_dataset, make_dataset
     from fmctd_dist.data.windows import train_data
     from fmctd_dist.diffusion.checkpoint import load_checkpoint
     from fmctd_dist.diffusion.train import train
@@ -283,8 +283,8 @@ def test_train_and_load_a_cube_model(tiny_cube, tmp_path, param):
              "train.max_steps=2", "train.batch_size=4", "train.val_batches=1", "train.warmup=1", "jump=5"]
     cfg = tiny_cfg(path.parent, "cube-single", *small)
     assert (cfg.frame_dim, cfg.token_dim, cfg.n_tokens) == (3, 30, 3)
-    assert make_family_dataset(cfg, progress=False)[0] == path  # the registry finds (and verifies) the cube data
-    train(cfg, train_data(cfg, load_family_dataset(cfg)), tmp_path / "ckpt", progress=False)
+    assert make_dataset(cfg, progress=False)[0] == path  # the registry finds (and verifies) the cube data
+    train(cfg, train_data(cfg, load_dataset(cfg)), tmp_path / "ckpt", progress=False)
     model, manifest = load_checkpoint(tmp_path / "ckpt", cfg)
     assert manifest["token_dim"] == 30 and model.frame_dim == 3
     x = torch.randn(2, 3, 30)
@@ -332,7 +332,7 @@ def test_quality_curve_job_on_cube_snapshots(tiny_cube, tmp_path, capsys):
     """jobs/bench/quality_curve.py measures each snapshot once (cached by digest) and draws the curve."""
     from conftest import load_job
 
-    from fmctd_dist.data.registry import load_family_dataset
+    from fmctd_dist.families import load_dataset
     from fmctd_dist.data.windows import train_data
     from fmctd_dist.diffusion.train import train
 
@@ -340,7 +340,7 @@ def test_quality_curve_job_on_cube_snapshots(tiny_cube, tmp_path, capsys):
     cfg = tiny_cfg(path.parent, "cube-single", "model.width=32", "model.layers=1", "model.heads=2", "model.ff=64",
                    "train.max_steps=4", "train.batch_size=4", "train.val_batches=1", "train.warmup=1", "jump=5",
                    "train.ckpt_every=2", "train.snapshot_every_s=1e-9")
-    train(cfg, train_data(cfg, load_family_dataset(cfg)), tmp_path / "run", progress=False)
+    train(cfg, train_data(cfg, load_dataset(cfg)), tmp_path / "run", progress=False)
     job = load_job("quality_curve")
     rows = job.points(tmp_path / "run")
     assert [r["steps"] for _, r in rows] == [2, 4] and all(0 <= r["unguided_no_warp"] <= 1 for _, r in rows)

@@ -14,7 +14,7 @@ from fmctd_dist.families.cube.scripts import ABOVE, EFFECTOR, PrePosition, Relea
 from fmctd_dist.families.cube.env import CubeEpisodes
 from fmctd_dist.errors import CheckpointError, ConfigError
 from fmctd_dist.families.cube.failures import DROPPED, KNOCKED, PLANNING_TIME_OUT, TIME_OUT, WRONG_CUBE, why_failed
-from fmctd_dist.family import hooks_for
+from fmctd_dist.families import hooks_for, plan_rules
 from fmctd_dist.search.actions import scale_actions
 from fmctd_dist.search.loop import SearchParams, search
 from fmctd_dist.search.value_rule import MazeValue
@@ -183,7 +183,7 @@ def tiny_double(tmp_path_factory):
     from fmctd_dist.control.policy.checkpoint import save_policy
     from fmctd_dist.families.cube.policy import CUBE_SPEC
     from fmctd_dist.control.policy.network import GoalPolicyNet
-    from fmctd_dist.data.registry import load_family_dataset, make_family_dataset
+    from fmctd_dist.families import load_dataset, make_dataset
     from fmctd_dist.data.windows import train_data
     from fmctd_dist.diffusion.train import train
 
@@ -192,10 +192,10 @@ def tiny_double(tmp_path_factory):
             f"env.policy={root / 'policy'}"]
     cfg = load_config(args + ["train.max_steps=2", "train.batch_size=4", "train.val_batches=1", "train.warmup=1"],
                       method="mctd")
-    make_family_dataset(cfg, progress=False)
+    make_dataset(cfg, progress=False)
     torch.manual_seed(0)
     with torch.random.fork_rng():
-        train(cfg, train_data(cfg, load_family_dataset(cfg)), root / "ckpt", progress=False)
+        train(cfg, train_data(cfg, load_dataset(cfg)), root / "ckpt", progress=False)
     pcfg = PolicyConfig()
     pcfg.policy.hidden = [16]
     net = GoalPolicyNet([16], CUBE_SPEC.in_dim, CUBE_SPEC.act_dim)
@@ -210,7 +210,8 @@ def test_a_cube_plan_has_the_right_shape_and_pins_the_other_cube(tiny_double):
 
     cfg = load_config(["method=fast-mctd-replan", *tiny_double, *SEARCH])
     ckpt = cfg.checkpoint_dir()
-    planner = make_planner(cfg, LocalDenoiser.from_checkpoint(ckpt, cfg), normaliser_from_manifest(read_manifest(ckpt)))
+    planner = make_planner(cfg, LocalDenoiser.from_checkpoint(ckpt, cfg), normaliser_from_manifest(read_manifest(ckpt)),
+                           plan_rules(cfg))
     env = CubeEpisodes("cube-double")
     r = env.reset(1, seed=0)
     start = env.state(r.obs)
@@ -238,7 +239,7 @@ def run_grid(args: list[str], tmp_path, runner: str) -> list[dict]:
 
     cfg = load_config(args + [f"eval.out={tmp_path}", "eval.run=r", "tasks=[1]", "seeds=[0]", "env.max_steps=100",
                               "env.replan_every=10", "eval.threads=1"])
-    p = prepare(cfg)
+    p = prepare(cfg, hooks_for)
     store = ResultStore(cfg.eval.out, cfg.eval.run)
     if runner == "local":
         return run_local(p, store, progress=False, log=lambda s: None)
@@ -288,7 +289,7 @@ def tiny_double_dense(tiny_double, tmp_path_factory):
     Diffusion Forcing load by default (their configs say jump=1; the cube value's warp is then env.warp_dense)."""
     import torch
 
-    from fmctd_dist.data.registry import load_family_dataset
+    from fmctd_dist.families import load_dataset
     from fmctd_dist.data.windows import train_data
     from fmctd_dist.diffusion.train import train
 
@@ -298,7 +299,7 @@ def tiny_double_dense(tiny_double, tmp_path_factory):
                               "train.warmup=1"], method="mctd")
     torch.manual_seed(0)
     with torch.random.fork_rng():
-        train(cfg, train_data(cfg, load_family_dataset(cfg)), root / "ckpt", progress=False)
+        train(cfg, train_data(cfg, load_dataset(cfg)), root / "ckpt", progress=False)
     return args
 
 
@@ -320,7 +321,7 @@ def test_a_missing_cube_policy_is_one_error_naming_the_training_command(tiny_dou
     args = [a for a in tiny_double if not a.startswith("env.policy=")]
     cfg = load_config(["method=fast-mctd-replan", *args, f"env.policy={tmp_path / 'none'}"])
     with pytest.raises(CheckpointError) as e:
-        prepare(cfg)
+        prepare(cfg, hooks_for)
     msg = str(e.value)
     assert "\n" not in msg and "python jobs/train_policy.py env=cube-double" in msg and "env.policy=" in msg
 
@@ -331,7 +332,7 @@ def test_a_missing_cube_model_is_one_error_naming_the_training_command(tiny_doub
     args = [a for a in tiny_double if not a.startswith("checkpoint=")]
     cfg = load_config(["method=fast-mctd-replan", *args, f"checkpoint={tmp_path / 'none'}"])
     with pytest.raises(CheckpointError) as e:
-        prepare(cfg)
+        prepare(cfg, hooks_for)
     assert "\n" not in str(e.value) and "python jobs/train.py env=cube-double jump=5" in str(e.value)
 
 
@@ -371,7 +372,7 @@ def test_the_cube_diffuser_hint_trains_one_that_plans_cube_episodes(tiny_double,
              "train.max_steps=2", "train.batch_size=4", "train.val_batches=1", "train.val_every=0"]
     cfg = load_config(["method=diffuser-replan", *args])
     with pytest.raises(CheckpointError, match="does not exist") as e:
-        prepare(cfg)
+        prepare(cfg, hooks_for)
     (cmd,) = [c for c in re.findall(r"`([^`]+)`", str(e.value)) if "jobs/train.py" in c]
     assert "env=cube-double" in cmd and "model.kind=diffuser" in cmd and f"train.out={tmp_path / 'ck'}" in cmd
     done = subprocess.run(cmd, shell=True, cwd=REPO_ROOT, capture_output=True, text=True, timeout=600,
@@ -389,7 +390,7 @@ def test_a_maze_checkpoint_given_to_a_cube_env_is_one_error(tiny_double, tiny_ch
     args = [a for a in tiny_double if not a.startswith("checkpoint=")]
     cfg = load_config(["method=fast-mctd-replan", *args, f"checkpoint={maze_ckpt}"])
     with pytest.raises(CheckpointError, match="pointmaze-medium"):
-        prepare(cfg)
+        prepare(cfg, hooks_for)
 
 
 def test_eval_job_smoke_on_a_cube_env(tiny_double, tmp_path):

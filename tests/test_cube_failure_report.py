@@ -8,9 +8,12 @@ import sys
 
 import numpy as np
 
+from conftest import load_job
 from fmctd_dist.config import REPO_ROOT
-from fmctd_dist.families.cube.failure_report import failure_facts, has_reasons, reason_table
 from fmctd_dist.evaluation.results import ResultStore
+
+WHY = load_job("why_failed")  # jobs/probes/why_failed.py holds the cube failure report
+failure_facts, has_reasons, reason_table = WHY.failure_facts, WHY.has_reasons, WHY.reason_table
 
 GOAL = [3.0, 0.0, 0.2]
 

@@ -14,7 +14,9 @@ import pytest
 from fmctd_dist.config import REPO_ROOT
 from fmctd_dist.control.policy.checkpoint import load_policy, read_policy_manifest
 from fmctd_dist.control.policy.config import load_policy_args
-from fmctd_dist.families.cube.policy import IN_DIM, VIEW_DIM, cube_view, policy_input
+from fmctd_dist.families.cube.policy import CUBE_SPEC, IN_DIM, VIEW_DIM, cube_view, policy_input
+from fmctd_dist.families.cube.policy_hooks import CubeHooks
+from fmctd_dist.families.maze.ant_policy import ANT_SPEC
 from fmctd_dist.families.cube.policy_rows import load_cube_policy_data, make_rows
 from fmctd_dist.control.policy.hindsight import label_run_ends, sample_pairs
 from fmctd_dist.control.policy.train import train_policy
@@ -51,7 +53,7 @@ def data_root(tmp_path_factory):
 def trained(data_root, tmp_path_factory):
     out = tmp_path_factory.mktemp("cubepolicy")
     with torch_threads(1):
-        summary = train_policy(*tiny(data_root, 30), out, progress=False)
+        summary = train_policy(*tiny(data_root, 30), CubeHooks(), out, progress=False)
     return out, summary
 
 
@@ -113,16 +115,17 @@ def test_short_training_lowers_the_loss_and_writes_a_cube_checkpoint(trained):
     assert m["in_dim"] == IN_DIM and m["act_dim"] == 5 and m["dataset"]["oracle"]["class"].endswith("CubePlanOracle")
     assert set(m["metrics"]["reach"]) == {"policy", "oracle", "zero"}
     assert all(r["tries"] == 2 and 0 <= r["reach_rate"] <= 1 for r in m["metrics"]["reach"].values())
-    policy = load_policy(out, env_name="cube-single")
+    policy = load_policy(out, CUBE_SPEC, env_name="cube-single")
     act = policy.act(np.zeros((3, VIEW_DIM)), np.ones((3, 3)))
     assert act.shape == (3, 5) and np.all(np.abs(act) < 1)
 
 
 def test_time_budget_stops_at_a_checkpoint_and_a_rerun_continues(data_root, tmp_path):
     out = tmp_path / "budget"
-    s = train_policy(*tiny(data_root, 40, "policy.time_budget_s=1e-9", "reach.rows=0"), out, progress=False)
+    s = train_policy(*tiny(data_root, 40, "policy.time_budget_s=1e-9", "reach.rows=0"), CubeHooks(), out,
+                     progress=False)
     assert s["step"] == 10 and "time_budget_s" in s["stopped"]
-    s = train_policy(*tiny(data_root, 20, "reach.rows=0"), out, progress=False)
+    s = train_policy(*tiny(data_root, 20, "reach.rows=0"), CubeHooks(), out, progress=False)
     assert s["step"] == 20 and s["resumed_from"] == 10 and s["stopped"] is None
 
 
@@ -130,20 +133,20 @@ def test_one_clear_error_for_a_policy_of_another_family(trained, tmp_path):
     out, _ = trained
     ant = REPO_ROOT / "checkpoints" / "antmaze-medium-policy"
     with pytest.raises(CheckpointError) as e:  # a maze policy given to a cube env
-        load_policy(ant, env_name="cube-single")
+        load_policy(ant, CUBE_SPEC, env_name="cube-single")
     msg = str(e.value)
     assert msg.startswith("cube policy:") and "kind 'ant-goal-bc' (the ant policy)" in msg
     assert "jobs/train_policy.py env=cube-single" in msg and "\n" not in msg
     with pytest.raises(CheckpointError, match="ant policy: .*kind 'cube-goal-bc' \\(the cube policy\\)"):
-        load_policy(out, env_name="antmaze-medium")
+        load_policy(out, ANT_SPEC, env_name="antmaze-medium")
     with pytest.raises(CheckpointError, match="cube policy: .*kind 'df' \\(a Diffusion Forcing planner\\)"):
-        load_policy(REPO_ROOT / "checkpoints" / "pointmaze-medium-h5", env_name="cube-double")
+        load_policy(REPO_ROOT / "checkpoints" / "pointmaze-medium-h5", CUBE_SPEC, env_name="cube-double")
     with pytest.raises(CheckpointError, match="cube policy: .*does not exist.*env=cube-single"):
-        load_policy(tmp_path / "nowhere", env_name="cube-single")
+        load_policy(tmp_path / "nowhere", CUBE_SPEC, env_name="cube-single")
     for env in ("cube-double", "cube-triple"):  # the single-cube policy drives every cube env (authors' choice)
-        assert read_policy_manifest(out, env)["env"] == "cube-single"
+        assert read_policy_manifest(out, CUBE_SPEC, env)["env"] == "cube-single"
     with pytest.raises(ConfigError, match="has no low-level policy"):
-        load_policy(out, env_name="pointmaze-medium")
+        load_policy(out, CUBE_SPEC, env_name="pointmaze-medium")
 
 
 def test_a_missing_dataset_is_one_dataset_error(tmp_path):

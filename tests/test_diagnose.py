@@ -2,9 +2,11 @@
 
 import numpy as np
 
+from conftest import load_job
 from fmctd_dist.families.maze.geometry import maze_geometry
 from fmctd_dist.families.maze.geometry import densify
-from fmctd_dist.families.maze.diagnose import failures
+
+failures = load_job("why_failed").failures  # jobs/probes/why_failed.py's maze measure
 
 
 def row(plan, traj, success=False, status="early_stop"):

@@ -13,6 +13,7 @@ import torch
 
 from conftest import TINY_DATA
 from fmctd_dist.config import REPO_ROOT, ModelConfig, load_config
+from fmctd_dist.families import plan_rules
 from fmctd_dist.families.maze.data import load_dataset
 from fmctd_dist.data.windows import train_data
 from fmctd_dist.denoiser.local import LocalDenoiser
@@ -236,7 +237,7 @@ def test_guidance_scale_zero_equals_unguided(diffuser_checkpoint):
 
 def test_planner_is_deterministic_per_seed(diffuser_checkpoint):
     den, cfg, manifest = denoiser_and_cfg(diffuser_checkpoint)
-    planner = make_planner(cfg, den, normaliser_from_manifest(manifest))
+    planner = make_planner(cfg, den, normaliser_from_manifest(manifest), plan_rules(cfg))
     assert isinstance(planner, DiffuserPlanner)
     a = planner.plan(np.array([1.0, 1.0]), GOAL, seed=3)
     b = planner.plan(np.array([1.0, 1.0]), GOAL, seed=3)
@@ -244,18 +245,20 @@ def test_planner_is_deterministic_per_seed(diffuser_checkpoint):
     assert a.waypoints.shape == (100, 2) and np.array_equal(a.waypoints, b.waypoints)
     assert not np.array_equal(a.waypoints, c.waypoints)
     assert a.denoise_calls == 1 and 0 < a.denoise_time_s <= a.plan_time_s
-    unguided = make_planner(load_config(diffuser_checkpoint[0] + ["method.guidance_scale=0"]), den,
-                            normaliser_from_manifest(manifest)).plan(np.array([1.0, 1.0]), GOAL, seed=3)
+    unguided_cfg = load_config(diffuser_checkpoint[0] + ["method.guidance_scale=0"])
+    unguided = make_planner(unguided_cfg, den, normaliser_from_manifest(manifest),
+                            plan_rules(unguided_cfg)).plan(np.array([1.0, 1.0]), GOAL, seed=3)
     assert not np.array_equal(a.waypoints, unguided.waypoints)
 
 
 def test_resampling_planner_is_deterministic_per_seed_and_costs_its_extra_calls(diffuser_checkpoint):
     den, cfg, manifest = denoiser_and_cfg(diffuser_checkpoint, "method.resample=3")
-    planner = make_planner(cfg, den, normaliser_from_manifest(manifest))
+    planner = make_planner(cfg, den, normaliser_from_manifest(manifest), plan_rules(cfg))
     start = np.array([1.0, 1.0])
     a, b, c = (planner.plan(start, GOAL, seed=s) for s in (3, 3, 4))
     assert np.array_equal(a.waypoints, b.waypoints) and not np.array_equal(a.waypoints, c.waypoints)
-    plain = make_planner(load_config(diffuser_checkpoint[0]), den, normaliser_from_manifest(manifest))
+    plain_cfg = load_config(diffuser_checkpoint[0])
+    plain = make_planner(plain_cfg, den, normaliser_from_manifest(manifest), plan_rules(plain_cfg))
     assert not np.array_equal(a.waypoints, plain.plan(start, GOAL, seed=3).waypoints)
     # the resampled schedule costs L + (U - 1)(L - 1) U-Net calls, and re-noising needs the job's seed
     x = np.random.default_rng(0).standard_normal((1, cfg.n_tokens, 2)).astype(np.float32)

@@ -15,6 +15,7 @@ from fmctd_dist.config import REPO_ROOT, load_config
 from fmctd_dist.diffusion.checkpoint import load_checkpoint
 from fmctd_dist.errors import CheckpointError, DatasetError
 from fmctd_dist.evaluation.grid import prepare
+from fmctd_dist.families import hooks_for
 
 pytestmark = pytest.mark.slow
 
@@ -46,12 +47,12 @@ def words(tiny_dataset, ckpt, *extra) -> list[str]:
 def test_missing_checkpoint_hint_trains_it_where_the_config_looks(tiny_dataset, tmp_path, extra):
     cfg = load_config(words(tiny_dataset, tmp_path / "ck", *extra))
     with pytest.raises(CheckpointError, match="does not exist") as e:
-        prepare(cfg)
+        prepare(cfg, hooks_for)
     cmd = suggested(e.value)
     assert f"train.out={tmp_path / 'ck'}" in cmd and f"jump={cfg.jump}" in cmd and "runs/" not in cmd
     assert ("model.kind=diffuser" in cmd) == (cfg.model.kind == "diffuser")
     run(cmd)
-    prepare(cfg)  # what failed now passes: present, intact, trained for this config
+    prepare(cfg, hooks_for)  # what failed now passes: present, intact, trained for this config
     model, manifest = load_checkpoint(cfg.checkpoint_dir(), cfg)
     assert manifest["train_steps"] == 2 and manifest["config"]["jump"] == cfg.jump
 
@@ -65,11 +66,11 @@ def test_corrupt_checkpoint_hint_replaces_it(tiny_checkpoint, tiny_dataset, tmp_
     (bad / "model.pt").write_bytes(bytes(raw))
     cfg = load_config(words(tiny_dataset, bad, "method=p-mctd", *TINY_MODEL))
     with pytest.raises(CheckpointError, match="corrupt") as e:
-        prepare(cfg)
+        prepare(cfg, hooks_for)
     cmd = suggested(e.value)
     assert cmd.startswith(f"mv {bad} {bad}.broken && python jobs/train.py") and f"train.out={bad}" in cmd
     run(cmd)
-    prepare(cfg)
+    prepare(cfg, hooks_for)
     load_checkpoint(bad, cfg)
     assert (tmp_path / "ck.broken" / "model.pt").exists()  # the broken one is kept aside, not deleted
 
@@ -89,10 +90,10 @@ def test_jump_mismatch_hint_offers_both_fixes_and_both_work(tiny_checkpoint, tin
     _, ckpt = tiny_checkpoint
     cfg = load_config(words(tiny_dataset, ckpt, "method=fast-mctd", *TINY_MODEL))
     with pytest.raises(CheckpointError, match="trained with jump=1 but the config has jump=5") as e:
-        prepare(cfg)
+        prepare(cfg, hooks_for)
     msg = str(e.value)
     assert "set jump=1" in msg
-    prepare(load_config(words(tiny_dataset, ckpt, "method=fast-mctd", *TINY_MODEL, "jump=1")))
+    prepare(load_config(words(tiny_dataset, ckpt, "method=fast-mctd", *TINY_MODEL, "jump=1")), hooks_for)
     cmd = suggested(e.value)
     assert "jump=5" in cmd and f"train.out={ckpt}" not in cmd
     new = re.search(r"set checkpoint=(\S+)$", msg)
@@ -101,7 +102,7 @@ def test_jump_mismatch_hint_offers_both_fixes_and_both_work(tiny_checkpoint, tin
     try:
         run(cmd)
         fixed = load_config(words(tiny_dataset, new.group(1), "method=fast-mctd", *TINY_MODEL))
-        prepare(fixed)
+        prepare(fixed, hooks_for)
         load_checkpoint(fixed.checkpoint_dir(), fixed)
     finally:
         shutil.rmtree(out, ignore_errors=True)
@@ -110,12 +111,12 @@ def test_jump_mismatch_hint_offers_both_fixes_and_both_work(tiny_checkpoint, tin
 def test_p_mctd_with_shipped_jump5_checkpoint_points_at_the_jump1_one():
     cfg = load_config(["method=p-mctd", "checkpoint=checkpoints/pointmaze-medium-h5"])
     with pytest.raises(CheckpointError) as e:
-        prepare(cfg)
+        prepare(cfg, hooks_for)
     msg = str(e.value)
     assert "trained with jump=5 but the config has jump=1" in msg and "set jump=5" in msg
     assert "checkpoints/pointmaze-medium-h1 holds one: drop checkpoint=" in msg
-    prepare(load_config(["method=p-mctd", "checkpoint=checkpoints/pointmaze-medium-h5", "jump=5"]))
-    prepare(load_config(["method=p-mctd"]))
+    prepare(load_config(["method=p-mctd", "checkpoint=checkpoints/pointmaze-medium-h5", "jump=5"]), hooks_for)
+    prepare(load_config(["method=p-mctd"]), hooks_for)
 
 
 def test_missing_dataset_hint_makes_that_dataset(tmp_path):

@@ -93,11 +93,12 @@ def test_train_state_with_code_payload_is_refused_and_never_runs(tmp_path):
 def test_ant_checkpoints_with_code_payload_are_refused(tmp_path):
     from fmctd_dist.families.maze.expert.expert import load_expert
     from fmctd_dist.control.policy.checkpoint import load_policy
+    from fmctd_dist.families.maze.ant_policy import ANT_SPEC
     from fmctd_dist.config import REPO_ROOT
 
     marker = tmp_path / "ran"
     for name, load in (("ant-expert", lambda d: load_expert(d)),
-                       ("antmaze-medium-policy", lambda d: load_policy(d, "antmaze-medium"))):
+                       ("antmaze-medium-policy", lambda d: load_policy(d, ANT_SPEC, "antmaze-medium"))):
         d = tmp_path / name
         shutil.copytree(REPO_ROOT / "checkpoints" / name, d)
         plant(d, MODEL_FILE, Payload(marker))

@@ -86,19 +86,85 @@ def test_no_import_cycle_in_the_package():
 
 CORE = ("search", "denoiser", "diffusion", "planners", "evaluation", "data", "control")  # name no family
 
+# docs/design.md §2: folder ranks, bottom to top; a folder imports only its own rank and lower ones. A family's
+# record counts as records; ``families`` alone is the door (fmctd_dist/families/__init__.py), above everything.
+RANKS: dict[str, int] = {
+    "errors": 0, "records": 1, "tokens": 1, "seeding": 1, "cli_words": 1, "cli": 1, "registry": 2, "config": 3,
+    "hints": 4, "device": 4, "family": 4, "artifacts": 4, "resume": 4, "diffusion": 5, "data": 5,
+    "denoiser": 6, "search": 6, "control": 6, "planners": 7, "evaluation": 8, "checkpoint_index": 8,
+    "families.maze": 9, "families.cube": 10, "families.visual": 10, "families": 11,
+}
+DOOR = "fmctd_dist.families"
+
+
+def modules() -> dict[str, Path]:
+    return {".".join(f.relative_to(PACKAGE.parent).with_suffix("").parts).removesuffix(".__init__"): f
+            for f in PACKAGE.rglob("*.py")}
+
 
 def dispatch_edges() -> dict[str, set[str]]:
     """module -> the fmctd_dist modules it names in string constants (``importlib.import_module`` dispatch:
-    the registry's records, a record's hooks / data / policy modules), for modules that import importlib."""
-    mods = {".".join(f.relative_to(PACKAGE.parent).with_suffix("").parts).removesuffix(".__init__"): f
-            for f in PACKAGE.rglob("*.py")}
+    the registry's records, a record's hooks / data / policy modules)."""
     edges: dict[str, set[str]] = {}
+    mods = modules()
     for m, f in mods.items():
-        tree = ast.parse(f.read_text())
-        names = {n.value.split(":")[0] for n in ast.walk(tree)
+        names = {n.value.split(":")[0] for n in ast.walk(ast.parse(f.read_text()))
                  if isinstance(n, ast.Constant) and isinstance(n.value, str)}
         edges[m] = {n for n in names if n in mods and n != m}
     return edges
+
+
+def full_graph() -> dict[str, set[str]]:
+    """The import graph plus dispatch: a module calling ``import_module`` reaches the modules it names and,
+    unless it is the door or the registry (which imports the records only), every module a record names."""
+    graph, named = import_graph(), dispatch_edges()
+    by_records = set().union(*(named[m] for m in graph if m.endswith(".record")))
+    for m, f in modules().items():
+        if "import_module(" in f.read_text():
+            graph[m] |= named[m] | (set() if m in (DOOR, "fmctd_dist.registry") else by_records)
+    return graph
+
+
+def folder(module: str) -> str:
+    """A module's rank-table folder: fmctd_dist.<folder>..., fmctd_dist.families.<name>..., a record: records."""
+    parts = module.split(".")[1:] or ["fmctd_dist"]
+    if parts[0] != "families" or len(parts) == 1:
+        return parts[0]
+    return "records" if parts[-1] == "record" else f"families.{parts[1]}"
+
+
+def rank_violations(graph: dict[str, set[str]]) -> list[str]:
+    return sorted(f"{m} ({folder(m)}, {RANKS[folder(m)]}) -> {t} ({folder(t)}, {RANKS[folder(t)]})"
+                  for m, ts in graph.items() for t in ts if RANKS[folder(t)] > RANKS[folder(m)])
+
+
+def folder_graph(graph: dict[str, set[str]]) -> dict[str, set[str]]:
+    out: dict[str, set[str]] = {folder(m): set() for m in graph}
+    for m, ts in graph.items():
+        out[folder(m)] |= {folder(t) for t in ts} - {folder(m)}
+    return out
+
+
+def test_every_folder_has_a_rank():
+    assert {folder(m) for m in modules()} - {"fmctd_dist"} <= set(RANKS)
+
+
+def test_folders_import_only_their_rank_and_below():
+    wrong = rank_violations(full_graph())
+    assert not wrong, f"imports upward (hand it down from the caller instead): {wrong}"
+
+
+def test_no_folder_level_cycle():
+    assert not cycles(folder_graph(full_graph()))
+
+
+def test_the_rank_checker_catches_a_planted_violation():
+    graph = full_graph()
+    graph["fmctd_dist.planners.mctd"].add("fmctd_dist.evaluation.grid")  # a planner looking up the grid
+    graph["fmctd_dist.search.loop"].add("fmctd_dist.families.maze.hooks")  # the core naming a family
+    assert len(rank_violations(graph)) == 2
+    assert cycles(folder_graph(graph))
+    assert folder("fmctd_dist.families.cube.record") == "records" and folder(DOOR) == "families"
 
 
 def test_family_records_are_light():
@@ -111,11 +177,8 @@ def test_family_records_are_light():
 
 
 def test_the_core_imports_no_family():
-    # docs/design.md §2: the core asks the registry and the family protocol; a family's package is never imported
-    # from below, statically or by name (the registry's own dispatch to the records is the one door)
-    graph = import_graph()
-    for m, targets in dispatch_edges().items():
-        graph[m] |= targets
-    wrong = sorted(f"{m} -> {t}" for m, ts in graph.items() for t in ts
-                   if m.split(".")[1] in CORE and t.startswith("fmctd_dist.families."))
+    # docs/design.md §2: nothing below the families names one, statically or by name; only the door looks
+    # families up (the registry's import of the records aside)
+    wrong = sorted(f"{m} -> {t}" for m, ts in full_graph().items() for t in ts
+                   if m.split(".")[1] in CORE and t.startswith("fmctd_dist.families"))
     assert not wrong, wrong

@@ -11,6 +11,7 @@ import torch
 from fmctd_dist.config import REPO_ROOT, load_config
 from fmctd_dist.denoiser.local import LocalDenoiser
 from fmctd_dist.diffusion.checkpoint import load_checkpoint, normaliser_from_manifest
+from fmctd_dist.families import plan_rules
 from fmctd_dist.families.maze.make import make_env
 from fmctd_dist.families.maze.episode import run_episode
 from fmctd_dist.planners import make_planner, plan_seed
@@ -27,7 +28,7 @@ def planner_for(tiny_checkpoint, micro_batch, *extra):
     cfg = load_config(args + SEARCH + list(extra))
     model, manifest = load_checkpoint(ckpt, cfg)
     denoiser = LocalDenoiser(model, cfg.diffusion, "cpu", micro_batch=micro_batch)
-    return cfg, make_planner(cfg, denoiser, normaliser_from_manifest(manifest))
+    return cfg, make_planner(cfg, denoiser, normaliser_from_manifest(manifest), plan_rules(cfg))
 
 
 def test_plan_is_pure_function_of_config_checkpoint_seed(tiny_checkpoint):

@@ -17,6 +17,7 @@ from fmctd_dist.denoiser.ray_pool import DenoiserPool, RayDenoiser
 from fmctd_dist.diffusion.checkpoint import normaliser_from_manifest, read_manifest
 from fmctd_dist.evaluation.grid import prepare
 from fmctd_dist.evaluation.ray_runner import PlannerDriver
+from fmctd_dist.families import hooks_for, plan_rules
 from fmctd_dist.planners import make_planner
 
 pytestmark = [pytest.mark.ray, pytest.mark.usefixtures("one_torch_thread")]
@@ -30,7 +31,7 @@ START, GOAL = np.array([0.0, 0.0]), np.array([20.0, 20.0])
 @pytest.fixture(scope="module")
 def prepared(tiny_checkpoint):
     args, _ = tiny_checkpoint
-    return prepare(load_config(args + SEARCH))
+    return prepare(load_config(args + SEARCH), hooks_for)
 
 
 @pytest.fixture(scope="module")
@@ -58,7 +59,7 @@ def pools(prepared, ray_cluster):
 
 def plan_with(prepared, denoiser, seed=7):
     cfg = prepared.cfg
-    planner = make_planner(cfg, denoiser, normaliser_from_manifest(read_manifest(prepared.checkpoint)))
+    planner = make_planner(cfg, denoiser, normaliser_from_manifest(read_manifest(prepared.checkpoint)), plan_rules(cfg))
     out = planner.plan(START, GOAL, seed)
     return out, planner.last_result.tree
 
@@ -186,7 +187,7 @@ def test_plan_identical_local_and_two_actors_under_bf16_and_compile(tiny_checkpo
     """Within one inference option (here both: bf16 weights and the compiled guided step) a plan is
     still the same bits in process and over 2 actors, each of which compiles its own graph (issue 22)."""
     args, _ = tiny_checkpoint
-    prep = prepare(load_config(args + SEARCH + ["diffusion.precision=bf16", "diffusion.compile=true"]))
+    prep = prepare(load_config(args + SEARCH + ["diffusion.precision=bf16", "diffusion.compile=true"]), hooks_for)
     ref = local_plan(prep)
     pools.release()
     pool = DenoiserPool.create(prep, 2)

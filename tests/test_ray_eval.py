@@ -23,6 +23,7 @@ import torch
 from fmctd_dist.config import REPO_ROOT, load_config
 from fmctd_dist.errors import CheckpointError
 from fmctd_dist.evaluation.grid import prepare
+from fmctd_dist.families import hooks_for
 
 pytestmark = [pytest.mark.ray, pytest.mark.usefixtures("one_torch_thread")]
 
@@ -46,7 +47,7 @@ def test_evaluate_entry_point_resumes_without_duplicates(tiny_checkpoint, ray_cl
 
     args, _ = tiny_checkpoint
     base = args + SEARCH + [f"eval.out={tmp_path}", "eval.run=r", "tasks=[2]"]
-    rows = evaluate(base + ["seeds=[0]"], progress=False)
+    rows = evaluate(base + ["seeds=[0]"], hooks_for, progress=False)
     assert [(r["task"], r["seed"]) for r in rows] == [(2, 0)]
     row = rows[0]
     assert row["n_denoiser_actors"] == 2 and row["retries"] == 0  # auto: one per CPU of the 2-CPU cluster
@@ -56,7 +57,7 @@ def test_evaluate_entry_point_resumes_without_duplicates(tiny_checkpoint, ray_cl
     mtime = first.stat().st_mtime_ns
     # an interrupted write of seed 1 leaves only a *.tmp; the rerun must redo it, and only it
     (first.parent / "seed=1.parquet.tmp").write_bytes(b"half a file")
-    rows = evaluate(base + ["seeds=[0,1]"], progress=False)
+    rows = evaluate(base + ["seeds=[0,1]"], hooks_for, progress=False)
     assert sorted((r["task"], r["seed"]) for r in rows) == [(2, 0), (2, 1)]
     assert first.stat().st_mtime_ns == mtime
     assert keys(tmp_path / "r") == [("task=2", "seed=0.parquet"), ("task=2", "seed=1.parquet")]
@@ -138,7 +139,7 @@ def test_actor_side_error_keeps_its_class(tiny_checkpoint, ray_cluster):
     from fmctd_dist.denoiser.ray_pool import DenoiserPool
 
     args, _ = tiny_checkpoint
-    p = prepare(load_config(args + SEARCH))
+    p = prepare(load_config(args + SEARCH), hooks_for)
     with pytest.raises(CheckpointError, match="differs from the expected"):
         DenoiserPool.create(dataclasses.replace(p, checkpoint_digest="0123456789abcdef"), 1)
 
@@ -229,12 +230,12 @@ def test_the_job_uploads_only_the_checkpoints_it_reads():
     """Each family's default job reads its planner and its robot's parts, and the upload stays small."""
     from fmctd_dist.evaluation.job_upload import checkpoints_read, runtime_env, upload_bytes
 
-    assert checkpoints_read(load_config([])) == ["checkpoints/pointmaze-medium-h5"]
+    assert checkpoints_read(load_config([]), hooks_for) == ["checkpoints/pointmaze-medium-h5"]
     ant = load_config(["env=antmaze-large"])
-    assert checkpoints_read(ant) == ["checkpoints/antmaze-large-h5", "checkpoints/antmaze-large-policy"]
+    assert checkpoints_read(ant, hooks_for) == ["checkpoints/antmaze-large-h5", "checkpoints/antmaze-large-policy"]
     cube = load_config(["env=cube-double", "method=fast-mctd-replan"])
-    assert checkpoints_read(cube) == ["checkpoints/cube-double-h5", "checkpoints/cube-single-policy"]
-    env = runtime_env(load_config([]))
+    assert checkpoints_read(cube, hooks_for) == ["checkpoints/cube-double-h5", "checkpoints/cube-single-policy"]
+    env = runtime_env(load_config([]), hooks_for)
     assert "/checkpoints/*" in env["excludes"] and env["excludes"][-1] == "!/checkpoints/pointmaze-medium-h5"
     assert upload_bytes(REPO_ROOT, env) < 50 * 2**20  # Ray refuses over 100 MiB
 
@@ -243,7 +244,7 @@ def test_a_broken_job_fails_before_anything_is_uploaded(tmp_path):
     with pytest.raises(CheckpointError):
         from fmctd_dist.evaluation.job_upload import runtime_env
 
-        runtime_env(load_config([f"checkpoint={tmp_path / 'nothing'}"]))
+        runtime_env(load_config([f"checkpoint={tmp_path / 'nothing'}"]), hooks_for)
 
 
 def test_address_local_starts_a_private_cluster_at_nice_0(monkeypatch):

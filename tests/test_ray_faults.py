@@ -16,6 +16,7 @@ from fmctd_dist.denoiser.ray_pool import DenoiserPool, RayDenoiser
 from fmctd_dist.diffusion.checkpoint import normaliser_from_manifest, read_manifest
 from fmctd_dist.errors import DeviceError
 from fmctd_dist.evaluation.grid import prepare
+from fmctd_dist.families import hooks_for, plan_rules
 from fmctd_dist.planners import make_planner
 
 pytestmark = [pytest.mark.ray, pytest.mark.usefixtures("one_torch_thread")]
@@ -28,7 +29,7 @@ START, GOAL = np.array([0.0, 0.0]), np.array([20.0, 20.0])
 
 def prepared_with(tiny_checkpoint, *extra):
     args, _ = tiny_checkpoint
-    return prepare(load_config(args + SEARCH + list(extra)))
+    return prepare(load_config(args + SEARCH + list(extra)), hooks_for)
 
 
 class KillingDenoiser(RayDenoiser):
@@ -49,7 +50,7 @@ class KillingDenoiser(RayDenoiser):
 
 
 def plan(p, denoiser):
-    planner = make_planner(p.cfg, denoiser, normaliser_from_manifest(read_manifest(p.checkpoint)))
+    planner = make_planner(p.cfg, denoiser, normaliser_from_manifest(read_manifest(p.checkpoint)), plan_rules(p.cfg))
     return planner.plan(START, GOAL, 7), planner.last_result.tree
 
 
@@ -145,6 +146,6 @@ def test_episode_past_its_timeout_is_rerun_then_one_error_not_a_hang(tiny_checkp
                                  "ray.episode_timeout_s=0.5", "ray.max_restarts=1"]
     t0 = time.monotonic()
     with pytest.raises(DeviceError, match=r"task 2 seed 0: its episode ran past ray.episode_timeout_s=0.5, 2 time"):
-        evaluate(overrides, progress=False)
+        evaluate(overrides, hooks_for, progress=False)
     assert time.monotonic() - t0 < 60
     assert not list(tmp_path.rglob("*.parquet"))

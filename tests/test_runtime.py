@@ -13,6 +13,7 @@ from fmctd_dist.config import DiffusionConfig, load_config
 from fmctd_dist.denoiser.local import LocalDenoiser
 from fmctd_dist.denoiser.runtime import RuntimeModel, runtime_model
 from fmctd_dist.diffusion.sampler import goal_reward
+from fmctd_dist.families import hooks_for
 from test_sampler import mixed_batch, tiny_model
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
@@ -162,7 +163,7 @@ def test_compile_without_a_cxx_compiler_is_one_clear_error_before_anything_start
     monkeypatch.setattr(shutil, "which", lambda name: None)
     monkeypatch.delenv("CXX", raising=False)
     with pytest.raises(ConfigError, match=r"diffusion.compile=true.*apt-get install g\+\+.*diffusion.compile=false"):
-        prepare(load_config(["diffusion.compile=true"]))
+        prepare(load_config(["diffusion.compile=true"]), hooks_for)
     from fmctd_dist.denoiser.runtime import check_compile
 
     check_compile(False, "cpu")  # off: nothing needed

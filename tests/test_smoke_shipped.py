@@ -8,6 +8,7 @@ from conftest import torch_threads, worker_threads
 from fmctd_dist.config import load_config
 from fmctd_dist.denoiser.local import LocalDenoiser
 from fmctd_dist.diffusion.checkpoint import load_checkpoint, normaliser_from_manifest
+from fmctd_dist.families import plan_rules
 from fmctd_dist.families.maze.make import make_env
 from fmctd_dist.errors import CheckpointError
 from fmctd_dist.families.maze.episode import run_episode
@@ -20,7 +21,7 @@ def shipped_fast_mctd_episode(env: str, task: int = 1, seed: int = 0) -> dict:
     model, manifest = load_checkpoint(cfg.checkpoint_dir(), cfg)
     with torch_threads(worker_threads()):
         denoiser = LocalDenoiser(model, cfg.diffusion, "cpu", cfg.ray.micro_batch)
-        planner = make_planner(cfg, denoiser, normaliser_from_manifest(manifest))
+        planner = make_planner(cfg, denoiser, normaliser_from_manifest(manifest), plan_rules(cfg))
         return run_episode(cfg, make_env(cfg.env.name), planner, task=task, seed=seed)
 
 
@@ -46,7 +47,8 @@ def shipped_diffuser_plan_steps(args: list[str], task: int, seed: int = 0) -> tu
     model, manifest = load_checkpoint(cfg.checkpoint_dir(), cfg)
     reset = make_env(cfg.env.name).reset(task, 0)
     with torch_threads(1):
-        planner = make_planner(cfg, LocalDenoiser(model, cfg.diffusion, "cpu", 1), normaliser_from_manifest(manifest))
+        planner = make_planner(cfg, LocalDenoiser(model, cfg.diffusion, "cpu", 1), normaliser_from_manifest(manifest),
+                               plan_rules(cfg))
         out = planner.plan(reset.obs, reset.goal, seed=seed)
     assert out.waypoints.shape == (cfg.env.horizon, 2)
     steps = np.linalg.norm(np.diff(np.concatenate([reset.obs[None], out.waypoints]), axis=0), axis=1)
@@ -86,13 +88,13 @@ def test_shipped_diffuser_without_its_edge_frames_is_one_clear_error():
 def test_replanning_search_with_the_shipped_cube_model_and_policy_solves_cube_single_task1_seed0(method):
     """Issue 20's smoke test: the shipped cube-single-h5 (Fast-MCTD-Replan) or dense cube-single-h1 (MCTD-Replan)
     model + the shipped cube policy, in process."""
-    from fmctd_dist.family import hooks_for
+    from fmctd_dist.families import hooks_for
 
     cfg = load_config([f"method={method}", "env=cube-single"])
     model, manifest = load_checkpoint(cfg.checkpoint_dir(), cfg)
     with torch_threads(worker_threads()):
         planner = make_planner(cfg, LocalDenoiser(model, cfg.diffusion, "cpu", cfg.ray.micro_batch),
-                               normaliser_from_manifest(manifest))
+                               normaliser_from_manifest(manifest), plan_rules(cfg))
         row = hooks_for(cfg.env.name).episodes(cfg).run(planner, 1, 0)
     assert row["success"], (row["plan_status"], row["why_failed"])
     assert row["env_steps"] <= cfg.env.max_steps and row["why_failed"] == ""

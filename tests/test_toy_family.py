@@ -27,7 +27,7 @@ def toy_family(monkeypatch):
 
 def test_a_toy_family_trains_evaluates_and_reports(toy_family, tmp_path, capsys):
     from fmctd_dist.config import load_config
-    from fmctd_dist.family import hooks_for
+    from fmctd_dist.families import hooks_for
 
     data = [f"data.root={tmp_path / 'data'}"]
     ckpt = tmp_path / "toy-plane-h1"

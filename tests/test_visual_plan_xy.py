@@ -133,7 +133,7 @@ def test_a_widened_model_plans_an_episode_and_configs_must_match_it(tmp_path):
     from fmctd_dist.denoiser.local import LocalDenoiser
     from fmctd_dist.diffusion.checkpoint import normaliser_from_manifest, read_manifest
     from fmctd_dist.diffusion.train import train
-    from fmctd_dist.family import hooks_for
+    from fmctd_dist.families import guide_map, hooks_for, plan_rules
     from fmctd_dist.planners import make_planner
 
     out = tmp_path / "xy-h5"
@@ -154,7 +154,8 @@ def test_a_widened_model_plans_an_episode_and_configs_must_match_it(tmp_path):
     hooks.check_episodes(cfg)
     with torch_threads(1):
         norm = normaliser_from_manifest(read_manifest(out))
-        planner = make_planner(cfg, LocalDenoiser.from_checkpoint(out, cfg), norm)
+        denoiser = LocalDenoiser.from_checkpoint(out, cfg, guide_map=guide_map(cfg.env.name))
+        planner = make_planner(cfg, denoiser, norm, plan_rules(cfg))
         episodes = hooks.episodes(cfg)
         first = []
         inner = planner.plan
@@ -176,13 +177,14 @@ def test_fast_mctd_with_the_shipped_xy_model_solves_task3_seed0():
     smoke test, it does not solve (it solves task 1 seeds 1, 5 and 6)."""
     from fmctd_dist.denoiser.local import LocalDenoiser
     from fmctd_dist.diffusion.checkpoint import normaliser_from_manifest, read_manifest
-    from fmctd_dist.family import hooks_for
+    from fmctd_dist.families import guide_map, hooks_for, plan_rules
     from fmctd_dist.planners import make_planner
 
     cfg = load_config([f"env={MEDIUM}", "method=fast-mctd", "visual.episodes=100", "visual.plan_xy=true",
                        f"checkpoint={XY}"])
     with torch_threads(1):
-        planner = make_planner(cfg, LocalDenoiser.from_checkpoint(XY, cfg), normaliser_from_manifest(read_manifest(XY)))
+        denoiser = LocalDenoiser.from_checkpoint(XY, cfg, guide_map=guide_map(cfg.env.name))
+        planner = make_planner(cfg, denoiser, normaliser_from_manifest(read_manifest(XY)), plan_rules(cfg))
         row = hooks_for(MEDIUM).episodes(cfg).run(planner, 3, 0)
     assert row["success"] and row["plan_status"] == "early_stop", (row["plan_status"], row["env_steps"])
 
@@ -192,7 +194,7 @@ def test_an_xy_model_of_another_estimator_is_one_clear_error(tmp_path):
     """A [z, x, y] planner whose frames carry another estimator's (x, y) than the one loaded: refused by name."""
     import shutil
 
-    from fmctd_dist.family import hooks_for
+    from fmctd_dist.families import hooks_for
 
     other = tmp_path / "xy-other"
     shutil.copytree(XY, other)

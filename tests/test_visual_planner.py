@@ -89,7 +89,7 @@ def test_position_readout_reads_latent_frames_as_the_estimator_does():
 def test_visual_env_trains_and_evaluates_now():
     """The visual family is no longer refused by train / eval; a maze-only part still names the visual code."""
     from fmctd_dist.families.maze.geometry import maze_geometry
-    from fmctd_dist.family import hooks_for
+    from fmctd_dist.families import hooks_for
 
     assert load_config([f"env={MEDIUM}"]).env.name == MEDIUM
     assert hooks_for(MEDIUM).__name__ == "fmctd_dist.families.visual.hooks"
@@ -196,7 +196,7 @@ def _copy_planner(tmp_path: Path, **edits) -> Path:
 @needs_shipped
 def test_bad_inputs_are_one_clear_error_each(tmp_path):
     """Checked by the hooks in the job process (grid.prepare calls check_episodes first): one error each."""
-    from fmctd_dist.family import hooks_for
+    from fmctd_dist.families import hooks_for
 
     hooks = hooks_for(MEDIUM)
     cfg = load_config([f"env={MEDIUM}", "jump=5"])
@@ -239,13 +239,14 @@ def test_fast_mctd_solves_task1_seed0_with_the_shipped_models():
     """
     from fmctd_dist.denoiser.local import LocalDenoiser
     from fmctd_dist.diffusion.checkpoint import normaliser_from_manifest, read_manifest
-    from fmctd_dist.family import hooks_for
+    from fmctd_dist.families import guide_map, hooks_for, plan_rules
     from fmctd_dist.planners import make_planner
 
     cfg = load_config([f"env={MEDIUM}", "method=fast-mctd", "env.warp_sparse=8.0"])
     with torch_threads(1):
-        denoiser = LocalDenoiser.from_checkpoint(cfg.checkpoint_dir(), cfg)
-        planner = make_planner(cfg, denoiser, normaliser_from_manifest(read_manifest(cfg.checkpoint_dir())))
+        denoiser = LocalDenoiser.from_checkpoint(cfg.checkpoint_dir(), cfg, guide_map=guide_map(MEDIUM))
+        planner = make_planner(cfg, denoiser, normaliser_from_manifest(read_manifest(cfg.checkpoint_dir())),
+                               plan_rules(cfg))
         episodes = hooks_for(MEDIUM).episodes(cfg)
         row = episodes.run(planner, 1, 0)
     assert row["env"] == MEDIUM and row["task"] == 1 and row["plans"] >= 1 and row["expansions"] > 0
@@ -299,8 +300,10 @@ def test_context_probe_plans_on_the_maze_and_jump_it_is_given(monkeypatch, words
 @needs_latents
 def test_plan_quality_reports_warps_and_manifold_distance():
     """jobs/probes/visual_plan_quality.py's measure on a small search: shapes and ranges of every statistic."""
-    from fmctd_dist.families.visual.plan_quality import nearest_distance, plan_quality
+    from conftest import load_job
 
+    probe = load_job("visual_plan_quality")
+    nearest_distance, plan_quality = probe.nearest_distance, probe.plan_quality
     assert nearest_distance(np.array([[0.0, 0.0], [3.0, 4.0]]), np.array([[0.0, 1.0], [3.0, 0.0]])).tolist() == [1, 4]
     cfg = load_config([f"env={MEDIUM}", "method=fast-mctd", "method.budget=10", "method.parallel=5"])
     with torch_threads(1):

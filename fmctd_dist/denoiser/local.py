@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
+from typing import Any, Callable
 
 import numpy as np
 import torch
@@ -48,16 +49,18 @@ class LocalDenoiser:
 
     @classmethod
     def from_checkpoint(cls, path: str | Path, cfg: Config, device: str | None = None,
-                        micro_batch: int | None = None, expect_digest: str | None = None,
-                        warn: bool = True) -> "LocalDenoiser":
+                        micro_batch: int | None = None, expect_digest: str | None = None, warn: bool = True,
+                        guide_map: Callable[[Config, dict[str, Any]], torch.nn.Module] | None = None
+                        ) -> "LocalDenoiser":
         """Load and verify a checkpoint against ``cfg`` (device/micro_batch default to cfg's); ``warn=False``:
-        no emulated-bf16 warning on stderr (Ray actors return it in their info instead)."""
+        no emulated-bf16 warning on stderr (Ray actors return it in their info instead). ``guide_map``: the
+        family's ``guide_map(cfg, manifest)`` when it guides in another space than the state
+        (``fmctd_dist.families.guide_map``; the visual maze), asked once with the checkpoint's manifest."""
         from fmctd_dist.diffusion.checkpoint import load_checkpoint
-        from fmctd_dist.family import guide_map_for
 
         model, manifest = load_checkpoint(path, cfg, expect_digest)
         return cls(model, cfg.diffusion, device or cfg.device, micro_batch or cfg.ray.micro_batch, manifest["digest"],
-                   guide_map_for(cfg, manifest), warn)
+                   None if guide_map is None else guide_map(cfg, manifest), warn)
 
     def denoise(self, batch: DenoiseBatch, micro_batch: int | None = None) -> DenoiseResult:
         """x_out, x0 [B, T, D] float32 for B jobs; denoise_time_s = wall time of the model work.

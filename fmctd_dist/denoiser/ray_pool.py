@@ -12,7 +12,7 @@ another live actor (denoise jobs are idempotent) and counted in ``DenoiseResult.
 no live actor is left, one :class:`DeviceError` is raised -- never a hang.
 
     pool = DenoiserPool.create(prepared, n=2)      # actors load the checkpoint (digest-checked)
-    planner = make_planner(cfg, pool.denoiser(), normaliser)
+    planner = make_planner(cfg, pool.denoiser(), normaliser, rules)
 """
 
 from __future__ import annotations
@@ -66,7 +66,7 @@ class DenoiserActor:
     constructor and the user would read "actor died" instead of our message.
     """
 
-    def __init__(self, checkpoint: str, digest: str, cfg_dict: dict, device: str):
+    def __init__(self, checkpoint: str, digest: str, cfg_dict: dict, device: str, guide_map: Any = None):
         import torch
 
         from fmctd_dist.denoiser.local import LocalDenoiser
@@ -88,7 +88,7 @@ class DenoiserActor:
                     "ray.num_gpus=1 on a cluster with GPUs, or set device=cpu"
                 )
             self._denoiser = LocalDenoiser.from_checkpoint(checkpoint, cfg, device=device, expect_digest=digest,
-                                                           warn=False)
+                                                           warn=False, guide_map=guide_map)
             self._info["device"] = str(self._denoiser.device)
             # an emulated-bf16 warning goes back to the job process, which says it (actors print nothing)
             self._info["warning"] = (bf16_warning(self._denoiser.device, "diffusion.precision")
@@ -259,7 +259,7 @@ class DenoiserPool:
     @classmethod
     def create(cls, prepared, n: int | None = None, timeout_s: float = 300.0) -> "DenoiserPool":
         """Start ``n`` (default ``ray.denoiser_actors``, 0 = :func:`auto_actors`) actors and wait until each
-        has loaded the model.
+        has loaded the model (with ``prepared.guide_map``, the family's function, passed by reference).
 
         Raises the actors' own CheckpointError/DeviceError (not a RayTaskError).
         """
@@ -272,7 +272,8 @@ class DenoiserPool:
                 "max_restarts": cfg.ray.max_restarts, "max_task_retries": 0}
         # max_task_retries=0: RayDenoiser re-routes a failed micro-batch itself (to a live actor, counted)
         actors = [DenoiserActor.options(**opts).remote(str(prepared.checkpoint), prepared.checkpoint_digest,
-                                                       cfg.to_dict(), prepared.device) for _ in range(n)]
+                                                       cfg.to_dict(), prepared.device, prepared.guide_map)
+                  for _ in range(n)]
         pool = cls(actors, cfg, [])
         try:
             pool.infos = ray.get([a.info.remote() for a in actors], timeout=timeout_s)

@@ -2,7 +2,10 @@
 
 ``prepare`` does every check a user can fail (config, device, checkpoint and its agreement
 with the config) in the job process, before any actor or episode starts; the runners then
-only skip keys that already have a row and write one Parquet file per finished episode.
+only skip keys that already have a row and write one Parquet file per finished episode. What the env
+family brings (episodes, plan rules, guide map) comes from the lookup the caller hands to :func:`prepare`
+(``hooks_for``: env name -> hook module, ``fmctd_dist.families.hooks_for``); :class:`Prepared` carries the
+hook module's functions, which pickle by reference, to the actors.
 """
 
 from __future__ import annotations
@@ -21,7 +24,7 @@ from fmctd_dist.errors import CheckpointError, ResultsError
 from fmctd_dist.evaluation.results import describe
 from fmctd_dist.evaluation.identity import config_hash, differences, identity_columns
 from fmctd_dist.evaluation.results import ResultStore
-from fmctd_dist.family import hooks_for
+from fmctd_dist.family import Episodes, HooksFor, PlanRules
 
 
 @dataclass(frozen=True)
@@ -35,9 +38,12 @@ class Prepared:
     config_hash: str
     git_sha: str
     policy_digest: str = ""  # the robot's low-level policy (ant, arm); "" when it has none (PD)
+    episodes: Callable[[Config], Episodes] | None = None  # the family's hooks (FamilyHooks), as functions
+    plan_rules: Callable[[Config], PlanRules] | None = None
+    guide_map: Callable[[Config, dict[str, Any]], Any] | None = None  # None: guidance on the state
 
 
-def check_inputs(cfg: Config) -> tuple[str, str, dict[str, Any]]:
+def check_inputs(cfg: Config, hooks_for: HooksFor) -> tuple[str, str, dict[str, Any]]:
     """Everything a job reads, checked: (the low-level policy's digest, the device, the planner's manifest).
 
     What :func:`prepare` checks, without the provenance it adds; ``evaluation.job_upload`` watches these
@@ -49,9 +55,12 @@ def check_inputs(cfg: Config) -> tuple[str, str, dict[str, Any]]:
     return policy, device, manifest
 
 
-def prepare(cfg: Config) -> Prepared:
-    policy, device, manifest = check_inputs(cfg)
-    return Prepared(cfg, cfg.checkpoint_dir(), manifest["digest"], device, config_hash(cfg), git_sha(), policy)
+def prepare(cfg: Config, hooks_for: HooksFor) -> Prepared:
+    """Every check a user can fail; ``hooks_for`` finds the env family's hooks (``fmctd_dist.families``)."""
+    hooks = hooks_for(cfg.env.name)
+    policy, device, manifest = check_inputs(cfg, hooks_for)
+    return Prepared(cfg, cfg.checkpoint_dir(), manifest["digest"], device, config_hash(cfg), git_sha(), policy,
+                    hooks.episodes, hooks.plan_rules, getattr(hooks, "guide_map", None))
 
 
 def same_policy(p: Prepared, episodes: Any) -> None:
@@ -141,10 +150,12 @@ def run_local(p: Prepared, store: ResultStore, progress: bool = True,
     if not todo:
         return []
     set_threads(cfg.eval.threads)
-    denoiser = LocalDenoiser.from_checkpoint(p.checkpoint, cfg, expect_digest=p.checkpoint_digest)
+    denoiser = LocalDenoiser.from_checkpoint(p.checkpoint, cfg, expect_digest=p.checkpoint_digest,
+                                             guide_map=p.guide_map)
     manifest = read_manifest(p.checkpoint)
-    planner = make_planner(cfg, denoiser, normaliser_from_manifest(manifest), cfg.eval.episode_time_limit)
-    episodes = hooks_for(cfg.env.name).episodes(cfg)  # the family's env + controller, built once
+    planner = make_planner(cfg, denoiser, normaliser_from_manifest(manifest), p.plan_rules(cfg),
+                           cfg.eval.episode_time_limit)
+    episodes = p.episodes(cfg)  # the family's env + controller, built once
     same_policy(p, episodes)
     rows = []
     bar = tqdm(todo, desc=f"{cfg.method.name} {cfg.env.name}", unit="ep", disable=not progress)

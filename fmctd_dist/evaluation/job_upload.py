@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from fmctd_dist.config import REPO_ROOT, Config
+from fmctd_dist.family import HooksFor
 
 CHECKPOINTS = REPO_ROOT / "checkpoints"
 # never part of a job: git's objects, and the local outputs .gitignore also names (Ray reads .gitignore too)
@@ -31,8 +32,9 @@ def _record_open(event: str, args: tuple[Any, ...]) -> None:
 _hooked = False
 
 
-def checkpoints_read(cfg: Config) -> list[str]:
-    """The checkpoint folders (``checkpoints/<name>``, sorted) that the eval job's checks open for ``cfg``."""
+def checkpoints_read(cfg: Config, hooks_for: HooksFor) -> list[str]:
+    """The checkpoint folders (``checkpoints/<name>``, sorted) that the eval job's checks open for ``cfg``
+    (``hooks_for``: ``fmctd_dist.families.hooks_for``)."""
     global _opened, _hooked
     from fmctd_dist.evaluation.grid import check_inputs
 
@@ -41,7 +43,7 @@ def checkpoints_read(cfg: Config) -> list[str]:
         _hooked = True
     _opened = []
     try:
-        check_inputs(cfg)
+        check_inputs(cfg, hooks_for)
         opened = list(_opened)
     finally:
         _opened = None
@@ -56,10 +58,10 @@ def checkpoints_read(cfg: Config) -> list[str]:
     return [f"checkpoints/{n}" for n in sorted(names)]
 
 
-def runtime_env(cfg: Config) -> dict[str, Any]:
+def runtime_env(cfg: Config, hooks_for: HooksFor) -> dict[str, Any]:
     """``--runtime-env-json`` for ``ray job submit --working-dir .``: every checkpoint folder left out but
     the ones ``cfg``'s job reads (gitignore-style patterns: the last match wins, ``!`` re-includes)."""
-    keep = checkpoints_read(cfg)
+    keep = checkpoints_read(cfg, hooks_for)
     return {"excludes": [*ALWAYS_LEFT_OUT, "/checkpoints/*", *(f"!/{d}" for d in keep)]}
 
 

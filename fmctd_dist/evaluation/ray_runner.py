@@ -23,7 +23,8 @@ Python entry point (joins a running cluster, or ``ray.init()`` first yourself)::
     import ray
     ray.init()
     from fmctd_dist.evaluation.ray_runner import evaluate
-    rows = evaluate(["method=fast-mctd", "tasks=[1]", "seeds=[0]"])
+    from fmctd_dist.families import hooks_for
+    rows = evaluate(["method=fast-mctd", "tasks=[1]", "seeds=[0]"], hooks_for)
 """
 
 from __future__ import annotations
@@ -49,6 +50,7 @@ from fmctd_dist.errors import ConfigError, DeviceError
 from fmctd_dist.evaluation.results import describe
 from fmctd_dist.evaluation.grid import Prepared, grid, missing, prepare, provenance
 from fmctd_dist.evaluation.results import ResultStore
+from fmctd_dist.family import HooksFor
 from fmctd_dist.planners.base import PlanOutput
 
 __all__ = ["PlannerDriver", "EnvActor", "run_ray", "evaluate", "connect", "check_ray_config"]
@@ -76,7 +78,8 @@ class PlannerDriver:
         cfg = prepared.cfg
         self.denoiser = RayDenoiser.from_config(actors, cfg)
         normaliser = normaliser_from_manifest(read_manifest(prepared.checkpoint))
-        self.planner = make_planner(cfg, self.denoiser, normaliser, cfg.eval.episode_time_limit)
+        self.planner = make_planner(cfg, self.denoiser, normaliser, prepared.plan_rules(cfg),
+                                    cfg.eval.episode_time_limit)
 
     def plan(self, start: np.ndarray, goal: np.ndarray, seed: int) -> PlanOutput:
         return self.planner.plan(np.array(start), np.array(goal), seed)
@@ -109,11 +112,9 @@ class EnvActor:
     """Runs whole episodes (the env family's env + controller) and returns their rows; prints nothing."""
 
     def __init__(self, prepared: Prepared, driver):
-        from fmctd_dist.family import hooks_for
-
         _one_thread()
         self.cfg, self.prepared = prepared.cfg, prepared
-        self.episodes = hooks_for(self.cfg.env.name).episodes(self.cfg)  # the family's env + controller
+        self.episodes = prepared.episodes(self.cfg)  # the family's env + controller
         self.planner = _DriverPlanner(driver)
 
     def run(self, task: int, seed: int) -> dict[str, Any]:
@@ -319,16 +320,17 @@ def run_ray(p: Prepared, store: ResultStore, progress: bool = True,
             ray.shutdown()
 
 
-def evaluate(overrides: list[str] | Config, progress: bool = True) -> list[dict[str, Any]]:
+def evaluate(overrides: list[str] | Config, hooks_for: HooksFor, progress: bool = True) -> list[dict[str, Any]]:
     """Evaluate on Ray and return one row per (task, seed) of the grid (resumed rows included).
 
     ``overrides`` are the words of ``jobs/eval.py`` (``["method=fast-mctd", "tasks=[1]"]``) or a
-    Config; the runner is Ray whatever ``eval.runner`` says. Joins the cluster ``ray.init()``
+    Config; ``hooks_for``: env name -> its family's hook module (``fmctd_dist.families.hooks_for``).
+    The runner is Ray whatever ``eval.runner`` says. Joins the cluster ``ray.init()``
     made (or a running one), else starts a local one for this call.
     """
     cfg = overrides if isinstance(overrides, Config) else load_config(list(overrides))
     cfg = dataclasses.replace(cfg, eval=dataclasses.replace(cfg.eval, runner="ray"))
-    p = prepare(cfg)
+    p = prepare(cfg, hooks_for)
     store = ResultStore(cfg.eval.out, cfg.eval.run)
     run_ray(p, store, progress=progress)
     keys = set(grid(cfg))

@@ -18,6 +18,7 @@ import numpy as np
 from fmctd_dist.config import Config
 from fmctd_dist.tokens import Normaliser
 from fmctd_dist.denoiser.protocol import Denoiser
+from fmctd_dist.family import PlanRules
 from fmctd_dist.planners.fixed import FixedSchedulePlanner
 
 
@@ -38,7 +39,7 @@ def uniform_levels(plan_tokens: int, levels: int, resample: int = 1) -> np.ndarr
 
 
 class DiffuserPlanner(FixedSchedulePlanner):
-    def __init__(self, cfg: Config, denoiser: Denoiser, normaliser: Normaliser):
+    def __init__(self, cfg: Config, denoiser: Denoiser, normaliser: Normaliser, rules: PlanRules):
         # frame_stack 1: a token is one frame
         levels = uniform_levels(cfg.plan_tokens, cfg.diffusion.levels, cfg.method.resample)
-        super().__init__(cfg, denoiser, normaliser, levels)
+        super().__init__(cfg, denoiser, normaliser, rules, levels)

@@ -11,10 +11,11 @@ from fmctd_dist.config import Config
 from fmctd_dist.tokens import Normaliser
 from fmctd_dist.denoiser.protocol import Denoiser
 from fmctd_dist.diffusion.schedule import PyramidSchedule
+from fmctd_dist.family import PlanRules
 from fmctd_dist.planners.fixed import FixedSchedulePlanner
 
 
 class DiffusionForcingPlanner(FixedSchedulePlanner):
-    def __init__(self, cfg: Config, denoiser: Denoiser, normaliser: Normaliser):
+    def __init__(self, cfg: Config, denoiser: Denoiser, normaliser: Normaliser, rules: PlanRules):
         levels = PyramidSchedule(cfg.plan_tokens, cfg.diffusion.levels).full()  # [n_rows, P+1]
-        super().__init__(cfg, denoiser, normaliser, levels)
+        super().__init__(cfg, denoiser, normaliser, rules, levels)

@@ -3,7 +3,7 @@
 Diffusion Forcing (pyramid rows) and Diffuser (all plan tokens at one level per row) differ
 only in that schedule, so both are this class with a different ``levels`` table. The guidance
 (scale and guided dims) and what the sampled plan becomes (cubes: the un-guided cubes pinned)
-come from the env family (:func:`fmctd_dist.family.hooks_for`).
+come from the env family's plan rules, handed in by the caller.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from fmctd_dist.config import Config
 from fmctd_dist.planners.base import repeat_waypoints
 from fmctd_dist.tokens import Normaliser, PlanCodec
 from fmctd_dist.denoiser.protocol import DenoiseBatch, Denoiser
-from fmctd_dist.family import hooks_for
+from fmctd_dist.family import PlanRules
 from fmctd_dist.planners.base import PlanOutput
 from fmctd_dist.search.loop import initial_noise
 
@@ -24,12 +24,13 @@ from fmctd_dist.search.loop import initial_noise
 class FixedSchedulePlanner:
     """One plan = context token + seeded noise, denoised through ``levels`` [R+1, P+1] at one guidance scale."""
 
-    def __init__(self, cfg: Config, denoiser: Denoiser, normaliser: Normaliser, levels: np.ndarray):
+    def __init__(self, cfg: Config, denoiser: Denoiser, normaliser: Normaliser, rules: PlanRules,
+                 levels: np.ndarray):
         self.cfg = cfg
         self.denoiser = denoiser
         self.codec = PlanCodec(normaliser, cfg.model.frame_stack)
         self.levels = levels
-        self.rules = hooks_for(cfg.env.name).plan_rules(cfg)
+        self.rules = rules
 
     def plan(self, start: np.ndarray, goal: np.ndarray, seed: int) -> PlanOutput:
         t0 = time.perf_counter()

@@ -2,8 +2,8 @@
 
 K (``method.parallel``), w, RAS, leaf parallelisation and H (``jump``, which also picks the
 sparse checkpoint) are config; this class only wires the schedule, codec and denoiser into
-:func:`fmctd_dist.search.search`, with the action set and plan value the env family gives for
-each call (:func:`fmctd_dist.family.hooks_for`), and expands a sparse plan to one waypoint per env step.
+:func:`fmctd_dist.search.search`, with the action set and plan value the env family's plan rules give for
+each call (handed in by the caller), and expands a sparse plan to one waypoint per env step.
 """
 
 from __future__ import annotations
@@ -17,20 +17,21 @@ from fmctd_dist.planners.base import repeat_waypoints
 from fmctd_dist.tokens import Normaliser, PlanCodec
 from fmctd_dist.denoiser.protocol import Denoiser
 from fmctd_dist.diffusion.schedule import PyramidSchedule
-from fmctd_dist.family import hooks_for
+from fmctd_dist.family import PlanRules
 from fmctd_dist.planners.base import PlanOutput
 from fmctd_dist.search.loop import SearchParams, search
 
 
 class MCTDPlanner:
-    def __init__(self, cfg: Config, denoiser: Denoiser, normaliser: Normaliser, time_limit_s: float = 0.0):
+    def __init__(self, cfg: Config, denoiser: Denoiser, normaliser: Normaliser, rules: PlanRules,
+                 time_limit_s: float = 0.0):
         m = cfg.method
         self.cfg = cfg
         self.denoiser = denoiser
         self.schedule = PyramidSchedule(cfg.plan_tokens, cfg.diffusion.levels, m.segment_transitions, m.sim_skip)
         self.codec = PlanCodec(normaliser, cfg.model.frame_stack)
         self.params = SearchParams.from_method(m, time_limit_s=time_limit_s, clip_noise=cfg.diffusion.clip_noise)
-        self.rules = hooks_for(cfg.env.name).plan_rules(cfg)
+        self.rules = rules
         self.last_result = None  # the SearchResult of the last call (tree, per-iteration stats)
 
     def plan(self, start: np.ndarray, goal: np.ndarray, seed: int) -> PlanOutput:

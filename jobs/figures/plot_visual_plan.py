@@ -27,7 +27,7 @@ from fmctd_dist.diffusion.checkpoint import normaliser_from_manifest, read_manif
 from fmctd_dist.families.maze.geometry import maze_geometry  # noqa: E402
 from fmctd_dist.families.visual.env import point_env_name, render_states  # noqa: E402
 from fmctd_dist.families.maze.plots import draw_maze  # noqa: E402
-from fmctd_dist.family import hooks_for  # noqa: E402
+from fmctd_dist.families import guide_map, hooks_for, plan_rules  # noqa: E402
 from fmctd_dist.planners import make_planner  # noqa: E402
 
 SHOWN = 5  # plan frames shown between the start and the goal
@@ -50,8 +50,8 @@ def main(argv: list[str]) -> int:
     set_threads(cfg.eval.threads or 1)
     task, seed = int(cfg.eval.tasks[0]), int(cfg.eval.seeds[0])
     manifest = read_manifest(cfg.checkpoint_dir(), cfg)
-    planner = Recording(make_planner(cfg, LocalDenoiser.from_checkpoint(cfg.checkpoint_dir(), cfg),
-                                     normaliser_from_manifest(manifest)))
+    denoiser = LocalDenoiser.from_checkpoint(cfg.checkpoint_dir(), cfg, guide_map=guide_map(cfg.env.name))
+    planner = Recording(make_planner(cfg, denoiser, normaliser_from_manifest(manifest), plan_rules(cfg)))
     episodes = hooks_for(cfg.env.name).episodes(cfg)
     row = episodes.run(planner, task, seed)
     plan_z = np.asarray(planner.first)  # [F_env, D], one planner frame per env step

@@ -26,6 +26,7 @@ from fmctd_dist.control.policy.checkpoint import load_policy
 from fmctd_dist.families.cube.env import CubeEpisodes
 from fmctd_dist.families.cube.episode import run_cube_episode
 from fmctd_dist.registry import require_family
+from fmctd_dist.families.cube.policy import CUBE_SPEC
 from fmctd_dist.families.cube.hooks import policy_dir
 from fmctd_dist.planners.base import PlanOutput
 from fmctd_dist.families.cube.value import CubeValue
@@ -49,7 +50,7 @@ class ArcPlanner:
 def main(argv: list[str]) -> int:
     cfg = load_config(argv, env="cube-single", method="fast-mctd-replan")
     require_family(cfg.env.name, ("cube",), "jobs/probes/cube_ideal_plans.py")
-    policy = load_policy(policy_dir(cfg), cfg.env.name)
+    policy = load_policy(policy_dir(cfg), CUBE_SPEC, cfg.env.name)
     env = CubeEpisodes(cfg.env.name)
     print(f"{cfg.env.name}: policy {policy_dir(cfg)} (digest {policy.manifest.get('digest')}), "
           f"replan every {cfg.env.replan_every or cfg.method.replan_every} policy steps, {cfg.env.max_steps} steps")

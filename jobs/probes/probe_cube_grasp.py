@@ -25,7 +25,7 @@ from fmctd_dist.device import set_threads
 from fmctd_dist.diffusion.checkpoint import normaliser_from_manifest, read_manifest
 from fmctd_dist.errors import ConfigError
 from fmctd_dist.evaluation.grid import prepare
-from fmctd_dist.family import hooks_for
+from fmctd_dist.families import hooks_for
 from fmctd_dist.planners import make_planner
 
 GRIP, CONTACT = 17, 18  # the arm observation's gripper opening and contact flag (docs/reference.md §13)
@@ -51,11 +51,11 @@ def main(argv: list[str]) -> int:
     cfg = load_config(rest)
     if len(cfg.eval.tasks) != 1 or len(cfg.eval.seeds) != 1:
         raise ConfigError("probe_cube_grasp: give one episode, e.g. tasks=[4] seeds=[1]")
-    p = prepare(cfg)
+    p = prepare(cfg, hooks_for)
     set_threads(cfg.eval.threads)
     denoiser = LocalDenoiser.from_checkpoint(p.checkpoint, cfg, expect_digest=p.checkpoint_digest)
-    planner = make_planner(cfg, denoiser, normaliser_from_manifest(read_manifest(p.checkpoint)))
-    episodes = hooks_for(cfg.env.name).episodes(cfg)
+    planner = make_planner(cfg, denoiser, normaliser_from_manifest(read_manifest(p.checkpoint)), p.plan_rules(cfg))
+    episodes = p.episodes(cfg)
     policy = episodes.policy
     seen: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
 

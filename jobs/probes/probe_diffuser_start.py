@@ -52,11 +52,13 @@ with torch.no_grad():
 # step after it, per task, for noise seeds 0-2 (the warp threshold is 1.0).
 from fmctd_dist.denoiser.local import LocalDenoiser  # noqa: E402
 from fmctd_dist.diffusion.checkpoint import normaliser_from_manifest  # noqa: E402
+from fmctd_dist.families import plan_rules  # noqa: E402
 from fmctd_dist.families.maze.make import make_env  # noqa: E402
 from fmctd_dist.planners import make_planner  # noqa: E402
 
 env = make_env(cfg.env.name)
-planner = make_planner(cfg, LocalDenoiser(model, cfg.diffusion, "cpu", 1), normaliser_from_manifest(manifest))
+planner = make_planner(cfg, LocalDenoiser(model, cfg.diffusion, "cpu", 1), normaliser_from_manifest(manifest),
+                       plan_rules(cfg))
 for task in range(1, 6):
     reset = env.reset(task, 0)
     cells = []

@@ -27,7 +27,7 @@ import numpy as np
 
 from fmctd_dist.cli import run
 from fmctd_dist.device import set_threads
-from fmctd_dist.families.visual.plan_quality import probe_config, task_frames, visual_planner
+from visual_plan_quality import probe_config, task_frames, visual_planner
 
 WINDOWS = 20  # validation starts
 

@@ -22,7 +22,7 @@ from fmctd_dist.config import Config, load_config
 from fmctd_dist.device import set_threads
 from fmctd_dist.families.visual.guide import Positions
 from fmctd_dist.families.visual.mlp import build_mlp
-from fmctd_dist.families.visual.plan_quality import TaskSearch, estimated_steps, search_task, visual_planner
+from visual_plan_quality import TaskSearch, estimated_steps, search_task, visual_planner
 
 SIGMAS = (0.0, 0.1, 0.3, 0.6)  # noise std in units of each latent dimension's std over the train latents
 WARP = 2.0  # the maze's sparse warp threshold, on estimated positions

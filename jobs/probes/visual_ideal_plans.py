@@ -23,7 +23,7 @@ from fmctd_dist.planners.base import repeat_waypoints
 from fmctd_dist.device import set_threads
 from fmctd_dist.families.maze.geometry import maze_geometry
 from fmctd_dist.families.visual.env import point_env_name, render_states
-from fmctd_dist.family import hooks_for
+from fmctd_dist.families import hooks_for
 from fmctd_dist.planners.base import PlanOutput
 
 

@@ -24,7 +24,7 @@ import numpy as np
 
 from fmctd_dist.cli import run
 from fmctd_dist.device import set_threads
-from fmctd_dist.families.visual.plan_quality import probe_config
+from visual_plan_quality import probe_config
 
 QUERIES = 500  # seeded train latents whose far neighbour is searched
 POOL = 20_000  # train latents searched (every k-th frame)
@@ -69,7 +69,7 @@ def largest_steps(cfg, ds, train_xy: np.ndarray) -> list[str]:
     ``train_xy`` [E, S, 2] are the train latents' estimated positions (main's). Plans are read as the
     planner's value reads them (estimated positions; with visual.plan_xy, the plan's own x, y).
     """
-    from fmctd_dist.families.visual.plan_quality import visual_planner
+    from visual_plan_quality import visual_planner
 
     planner, episodes, manifest, norm = visual_planner(cfg)
     positions = episodes.frames

@@ -2,9 +2,11 @@
 
 Like the expert's: ``model.pt`` (state_dict, input normalisation included) + ``manifest.json``
 (kind, env, config, dataset digests, git sha, metrics, sha256), loaded with
-``torch.load(weights_only=True)``. The manifest's ``kind`` names the family's
-:class:`~fmctd_dist.control.policy.spec.PolicySpec`; anything wrong (missing, another kind,
-another env, corrupt, shapes) is one :class:`CheckpointError` that says what to do.
+``torch.load(weights_only=True)``. The caller names the family's
+:class:`~fmctd_dist.control.policy.spec.PolicySpec` it expects (the family that drives the robot knows
+its own; jobs ask :func:`fmctd_dist.families.policy_hooks`); the manifest's ``kind`` must be that spec's.
+Anything wrong (missing, another kind, another env, corrupt, shapes) is one :class:`CheckpointError`
+that says what to do.
 """
 
 from __future__ import annotations
@@ -16,20 +18,19 @@ import numpy as np
 import torch
 
 from fmctd_dist.control.policy.network import GoalPolicyNet
-from fmctd_dist.control.policy.spec import PolicySpec
-from fmctd_dist.control.policy.hooks import policy_kinds, spec_for_env
+from fmctd_dist.control.policy.spec import PolicySpec, require_policy
 from fmctd_dist.artifacts import load_weights, read_weights_manifest, save_weights, verify_weights
 from fmctd_dist.errors import CheckpointError
-from fmctd_dist.registry import family
+from fmctd_dist.registry import env_specs, family
 
 FORMAT_VERSION = 1
 OTHER_KINDS = {"ant-direction-sac": "the ant expert that makes datasets", "df": "a Diffusion Forcing planner",
                "diffuser": "a Diffuser planner"}
 
 
-def label(spec: PolicySpec | None) -> str:
-    """How errors name the policy: 'ant policy', 'cube policy' (or 'policy' when the family is unknown)."""
-    return {"antmaze": "ant policy", "cube": "cube policy"}.get(spec.family, "policy") if spec else "policy"
+def label(kind: str) -> str:
+    """How errors name the policy of a family kind: 'ant policy', 'cube policy' (else 'policy')."""
+    return {"antmaze": "ant policy", "cube": "cube policy"}.get(kind, "policy")
 
 
 def train_fix(env_name: str = "<env>", out: str | Path | None = None) -> str:
@@ -46,32 +47,34 @@ def save_policy(out_dir: str | Path, net: GoalPolicyNet, spec: PolicySpec, field
                                        "input_layout": spec.input_layout})
 
 
-def read_policy_manifest(ckpt_dir: str | Path, env_name: str | None = None) -> dict[str, Any]:
-    """The manifest of a policy dir; CheckpointError if missing, another kind, or trained for another env.
+def read_policy_manifest(ckpt_dir: str | Path, spec: PolicySpec, env_name: str | None = None) -> dict[str, Any]:
+    """The manifest of a policy dir; CheckpointError if missing, not of ``spec``'s kind, or trained for another env.
 
-    With ``env_name`` the policy must be of that env's family and, unless the family's policy
-    serves all its envs (cubes), trained on that very env.
+    With ``env_name`` the policy must have been trained on that very env, unless the family's policy
+    serves all its envs (cubes) and it was trained on one of them.
     """
+    if env_name is not None:
+        require_policy(env_name)  # a point maze: one ConfigError (it has the PD controller)
     ckpt_dir = Path(ckpt_dir)
-    want = spec_for_env(env_name) if env_name is not None else None
-    who = label(want)
+    who = label(spec.family)
     fix = train_fix(env_name or "<env>", ckpt_dir)
     manifest = read_weights_manifest(ckpt_dir, who, f"{fix} (or point policy.out to its dir)", fix)
     kind = manifest.get("kind")
-    have = policy_kinds().get(kind) if isinstance(kind, str) else None
-    if have is None or (want is not None and have is not want):
+    if kind != spec.kind:
         what = kind or manifest.get("model_kind") or "unknown"
-        desc = f" ({OTHER_KINDS[what]})" if what in OTHER_KINDS else f" (the {label(have)})" if have else ""
+        # another family's policy (save_policy writes an input layout) is named by the env it was trained on
+        other = label(env_specs()[manifest["env"]].family) if "input_layout" in manifest and \
+            manifest.get("env") in env_specs() else "policy"
+        desc = f" ({OTHER_KINDS[what]})" if what in OTHER_KINDS else f" (the {other})" if other != "policy" else ""
         for_env = f" for {env_name}" if env_name else ""
-        wanted = f"a goal-conditioned {label(want)} (kind={want.kind!r})" if want else \
-            f"a goal-conditioned policy (kind one of {sorted(policy_kinds())})"
         raise CheckpointError(
-            f"{who}: {ckpt_dir} holds a checkpoint of kind {what!r}{desc}, not {wanted}; point policy.out to a dir "
-            f"written by jobs/train_policy.py{for_env}, or {train_fix(env_name or '<env>')}"
+            f"{who}: {ckpt_dir} holds a checkpoint of kind {what!r}{desc}, not a goal-conditioned {who} "
+            f"(kind={spec.kind!r}); point policy.out to a dir written by jobs/train_policy.py{for_env}, or "
+            f"{train_fix(env_name or '<env>')}"
         )
     trained_on = manifest.get("env")
     if env_name is not None and trained_on != env_name and not (
-            have.any_env_of_family and isinstance(trained_on, str) and family(trained_on) == have.family):
+            spec.any_env_of_family and isinstance(trained_on, str) and family(trained_on) == spec.family):
         raise CheckpointError(
             f"{who} {ckpt_dir} was trained on {trained_on} data but the env is {env_name}; point "
             f"policy.out to a policy trained on {env_name}, or {train_fix(env_name)}"
@@ -90,8 +93,8 @@ class GoalPolicy:
     def act(self, obs: np.ndarray, subgoal: np.ndarray) -> np.ndarray:
         obs, subgoal = np.asarray(obs), np.asarray(subgoal)
         if obs.shape[-1:] != (self.spec.obs_dim,) or subgoal.shape[-1:] != (self.spec.goal_dim,):
-            raise ValueError(f"{label(self.spec)} {self.where}: got obs {obs.shape} and subgoal {subgoal.shape}; "
-                             f"{self.spec.input_layout}")
+            raise ValueError(f"{label(self.spec.family)} {self.where}: got obs {obs.shape} and subgoal "
+                             f"{subgoal.shape}; {self.spec.input_layout}")
         x = torch.from_numpy(self.spec.make_input(obs, subgoal, self.max_dist))
         with torch.no_grad():
             return self.net(x).numpy().astype(np.float64)
@@ -99,14 +102,15 @@ class GoalPolicy:
     __call__ = act
 
 
-def load_policy(ckpt_dir: str | Path, env_name: str | None = None, obs_dim: int | None = None) -> GoalPolicy:
-    """Verify and load a policy. ``env_name``: the env it will drive; ``obs_dim``: what the caller feeds."""
+def load_policy(ckpt_dir: str | Path, spec: PolicySpec, env_name: str | None = None,
+                obs_dim: int | None = None) -> GoalPolicy:
+    """Verify and load a policy of ``spec``. ``env_name``: the env it will drive; ``obs_dim``: what the caller
+    feeds."""
     from fmctd_dist.control.policy.config import policy_config_from_dict  # deferred: omegaconf
 
     ckpt_dir = Path(ckpt_dir)
-    manifest = read_policy_manifest(ckpt_dir, env_name)
-    spec = policy_kinds()[manifest["kind"]]
-    who = label(spec)
+    manifest = read_policy_manifest(ckpt_dir, spec, env_name)
+    who = label(spec.family)
     fix = train_fix(str(manifest.get("env")), ckpt_dir)
     verify_weights(ckpt_dir, manifest, f"{who} {ckpt_dir}", fix)
     feeds = spec.obs_dim if obs_dim is None else obs_dim

@@ -18,7 +18,7 @@ from typing import Any
 
 from fmctd_dist.config import (Config, build, check_ranges, from_dict, parse_overrides, planner_config, resolve_path,
                                spec)
-from fmctd_dist.control.policy.hooks import spec_for_env
+from fmctd_dist.control.policy.spec import require_policy
 from fmctd_dist.errors import ConfigError
 
 # Per-family defaults that differ from the ant's (the dataclass defaults). The cube's reach test follows a
@@ -92,7 +92,7 @@ def load_policy_args(args: list[str] | None = None) -> tuple[Config, PolicyConfi
     groups, dotted, pwords = parse_overrides(list(args or []), PolicyConfig(),
                                              example="env=antmaze-medium or policy.max_steps=5000")
     cfg = planner_config(groups, dotted, env="antmaze-medium", method="mctd")  # cube: no planner yet
-    family = spec_for_env(cfg.env.name).family  # a point maze: one ConfigError (it has the PD controller)
+    family = require_policy(cfg.env.name).family  # a point maze: one ConfigError (it has the PD controller)
     defaults = [(key, str(value)) for key, value in FAMILY_DEFAULTS.get(family, {}).items()]
     return cfg, build(PolicyConfig, [*defaults, *pwords], validate_policy)
 

@@ -12,6 +12,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fmctd_dist.errors import ConfigError
+from fmctd_dist.records import EnvSpec
+from fmctd_dist.registry import env_spec, env_specs
+
 # (obs [..., obs_dim], subgoal [..., goal_dim], max_subgoal_dist) -> network input [..., in_dim]
 InputFn = Callable[[np.ndarray, np.ndarray, float], np.ndarray]
 
@@ -28,3 +32,13 @@ class PolicySpec:
     input_layout: str  # act()'s arguments, in words (for errors and manifests)
     make_input: InputFn  # (obs, subgoal, max_subgoal_dist) -> [..., in_dim] float32
     any_env_of_family: bool  # True: a policy trained on one env of the family drives all of them (cubes)
+
+
+def require_policy(env_name: str) -> EnvSpec:
+    """``env_name``'s registry spec when its robot has a learned policy, else one ConfigError."""
+    spec = env_spec(env_name)
+    if not spec.policy:
+        with_policy = ", ".join(n for n, s in env_specs().items() if s.policy)
+        raise ConfigError(f"env={env_name} has no low-level policy (e.g. a point is driven by the PD controller); "
+                          f"use env={with_policy}")
+    return spec

@@ -9,7 +9,8 @@ optimiser, batch RNG, history); rerunning continues from there and is bitwise th
 uninterrupted run (same thread count). ``policy.time_budget_s`` stops a run early at a
 checkpoint (the next call continues it). At the end, with ``reach.rows > 0``, the reach
 rates of the policy and the family's references go into the manifest. What differs by
-family (rows, floor, reach test) comes from :mod:`fmctd_dist.control.policy.hooks`.
+family (spec, rows, floor, reach test) comes from the hooks its caller hands in
+(:func:`fmctd_dist.families.policy_hooks`).
 """
 
 from __future__ import annotations
@@ -27,7 +28,6 @@ from fmctd_dist.artifacts import MANIFEST_FILE
 from fmctd_dist.control.policy.checkpoint import read_policy_manifest, save_policy
 from fmctd_dist.control.policy.config import PolicyConfig, policy_dir
 from fmctd_dist.control.policy.hindsight import sample_pairs
-from fmctd_dist.control.policy.hooks import hooks_for_env
 from fmctd_dist.control.policy.network import GoalPolicyNet, build_net
 from fmctd_dist.device import set_threads
 from fmctd_dist.errors import CheckpointError
@@ -60,39 +60,38 @@ def mse(net: GoalPolicyNet, x: torch.Tensor, y: torch.Tensor, chunk: int = 4096)
     return total / y.numel()
 
 
-def _finished(out: Path) -> dict[str, Any]:
-    """Summary of a finished run from its manifest (reach included)."""
-    m = read_policy_manifest(out)
+def _finished(m: dict[str, Any], out: Path) -> dict[str, Any]:
+    """Summary of a finished run from its manifest ``m`` (reach included)."""
     return {"step": int(m["steps"]), "wall_time_s": float(m["wall_time_s"]), "out_dir": str(out),
             "resumed_from": int(m["steps"]), "name": m["name"], "rows": m["dataset"]["rows"], "stopped": None,
             **m["metrics"]}
 
 
-def train_policy(cfg: Config, pcfg: PolicyConfig, out_dir: str | Path | None = None,
+def train_policy(cfg: Config, pcfg: PolicyConfig, hooks: Any, out_dir: str | Path | None = None,
                  progress: bool = True) -> dict[str, Any]:
-    """Train (or resume) into out_dir (default policy.out); returns the manifest's summary."""
+    """Train (or resume) into out_dir (default policy.out) with the env's policy ``hooks``; returns the manifest's
+    summary."""
     p = pcfg.policy
     set_threads(p.threads)
-    hooks = hooks_for_env(cfg.env.name)
     spec = hooks.spec
     out = Path(out_dir) if out_dir is not None else policy_dir(cfg, pcfg)
     train_rows, val_rows, data_manifest = hooks.load(cfg, pcfg)
     data_sha = dict(data_manifest["sha256"])
 
-    m = read_policy_manifest(out) if (out / MANIFEST_FILE).exists() else None  # another kind: CheckpointError
+    m = read_policy_manifest(out, spec) if (out / MANIFEST_FILE).exists() else None  # another kind: CheckpointError
     state = load_train_state(out)
     if state is None and m is not None:
         if int(m["steps"]) < p.max_steps:
             raise CheckpointError(f"{out} holds a policy ({m['steps']} steps) without train_state.pt, so its "
                                   "optimiser is gone; train into a fresh policy.out dir (this one is left as it is)")
-        return _finished(out)  # finished (e.g. shipped): nothing to do
+        return _finished(m, out)  # finished (e.g. shipped): nothing to do
     if state is not None:
         check_resume(out, "policy", "policy.out", {**state["config"], "env": state["env"]},
                      {**pcfg.to_dict(), "env": cfg.env.name}, RESUME_FIELDS + ("env",),
                      [(f"{split} sha256", state["dataset_sha256"].get(split), sha) for split, sha in data_sha.items()],
                      data_fix="point data.* at the dataset it started on")
         if int(state["step"]) >= p.max_steps:
-            return _finished(out)
+            return _finished(read_policy_manifest(out, spec), out)
 
     net = build_net(p.hidden, spec.in_dim, spec.act_dim, p.seed)
     ni, nj = pairs(train_rows, _rng(p.seed, NORM_STREAM), NORM_ROWS, pcfg)

@@ -62,9 +62,10 @@ def policy_dir(cfg: Config) -> Path:
 def check_episodes(cfg: Config) -> str:
     """The cube policy exists and is a cube policy: else one CheckpointError naming the training command."""
     from fmctd_dist.control.policy.checkpoint import read_policy_manifest  # deferred: torch
+    from fmctd_dist.families.cube.policy import CUBE_SPEC
 
     try:
-        return str(read_policy_manifest(policy_dir(cfg), cfg.env.name).get("digest", ""))
+        return str(read_policy_manifest(policy_dir(cfg), CUBE_SPEC, cfg.env.name).get("digest", ""))
     except CheckpointError as e:
         raise CheckpointError(f"env.policy={cfg.env.policy or DEFAULT_POLICY} (the cube low-level policy; "
                               f"env.policy=DIR for another): {e}") from None
@@ -76,10 +77,11 @@ class CubeEpisodeRunner:
     def __init__(self, cfg: Config):
         from fmctd_dist.control.policy.checkpoint import load_policy
         from fmctd_dist.families.cube.env import CubeEpisodes
+        from fmctd_dist.families.cube.policy import CUBE_SPEC
 
         self.cfg = cfg
         self.env = CubeEpisodes(cfg.env.name)
-        policy = load_policy(policy_dir(cfg), cfg.env.name)
+        policy = load_policy(policy_dir(cfg), CUBE_SPEC, cfg.env.name)
         self.policy = policy.act
         self.policy_digest = str(policy.manifest.get("digest", ""))  # rows say which policy drove the arm
 

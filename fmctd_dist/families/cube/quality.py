@@ -25,12 +25,12 @@ from typing import Any
 import numpy as np
 
 from fmctd_dist.config import Config, config_from_dict
-from fmctd_dist.data.registry import load_family_dataset
 from fmctd_dist.tokens import PlanCodec
 from fmctd_dist.denoiser.local import LocalDenoiser
 from fmctd_dist.diffusion.checkpoint import load_checkpoint, normaliser_from_manifest
 from fmctd_dist.families.maze.plan_quality import boundary_and_inside, sample_plans
 from fmctd_dist.registry import require_family
+from fmctd_dist.families.cube.data import load_cube_dataset
 from fmctd_dist.families.cube.value import LEVEL, TABLE_Z, CubeValue
 
 # the search's own support rule (families/cube/value.py), so the table measures what the value will demand
@@ -80,7 +80,7 @@ def plan_row(plans: np.ndarray, starts: np.ndarray, jump: int, frame_stack: int)
 def validation_starts(cfg: Config, n: int = N_STARTS, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """n seeded (episode, step) points of the validation split -> (starts [n, 3N], the data's own
     following horizon, subsampled every jump steps [n, F, 3N])."""
-    val = load_family_dataset(cfg).val  # [E, S, 3N]
+    val = load_cube_dataset(cfg).val  # [E, S, 3N]
     rng = np.random.default_rng([seed, 0xC0BE])
     ep = rng.integers(0, val.shape[0], n)
     off = rng.integers(0, val.shape[1] - cfg.env.horizon, n)

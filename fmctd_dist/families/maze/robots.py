@@ -37,9 +37,10 @@ def check_controller(cfg: Config) -> dict[str, Any] | None:
         return None
     from fmctd_dist.control.policy.checkpoint import read_policy_manifest  # deferred: torch
     from fmctd_dist.errors import CheckpointError
+    from fmctd_dist.families.maze.ant_policy import ANT_SPEC
 
     try:
-        return read_policy_manifest(policy_dir(cfg), cfg.env.name)
+        return read_policy_manifest(policy_dir(cfg), ANT_SPEC, cfg.env.name)
     except CheckpointError as e:
         raise CheckpointError(f"env.policy={cfg.env.policy or policy_dir(cfg)} (the ant's low-level policy, set "
                               f"env.policy=DIR to use another): {e}") from None
@@ -53,6 +54,7 @@ def controller_factory(cfg: Config) -> ControllerFactory:
         return PDController
     from fmctd_dist.control.policy.checkpoint import load_policy
     from fmctd_dist.families.maze.ant_controller import AntPlanController
+    from fmctd_dist.families.maze.ant_policy import ANT_SPEC
 
-    policy = load_policy(policy_dir(cfg), cfg.env.name)
+    policy = load_policy(policy_dir(cfg), ANT_SPEC, cfg.env.name)
     return lambda plan: AntPlanController(plan, policy.act)

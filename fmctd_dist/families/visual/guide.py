@@ -97,7 +97,7 @@ def load_positions(cfg: Config, vae_digest: str, latent_dim: int) -> tuple[Posit
 
 
 def guide_map(cfg: Config, manifest: dict[str, Any]) -> nn.Module:
-    """The guidance map of a visual planner checkpoint (``hooks.guide_map_for`` asks for it)."""
+    """The guidance map of a visual planner checkpoint (the family hooks' ``guide_map``)."""
     prov = latent_provenance(manifest, cfg.checkpoint_dir())
     norm = manifest["normaliser"]
     if prov.get("plan_xy"):
