@@ -95,6 +95,7 @@ RANKS: dict[str, int] = {
     "families.maze": 9, "families.cube": 10, "families.visual": 10, "families": 11,
 }
 DOOR = "fmctd_dist.families"
+RECORD_DATA = ("record", "paper")  # a family's record and the plain data it holds (the paper's numbers): rank 1
 
 
 def modules() -> dict[str, Path]:
@@ -126,11 +127,12 @@ def full_graph() -> dict[str, set[str]]:
 
 
 def folder(module: str) -> str:
-    """A module's rank-table folder: fmctd_dist.<folder>..., fmctd_dist.families.<name>..., a record: records."""
+    """A module's rank-table folder: fmctd_dist.<folder>..., fmctd_dist.families.<name>..., a record and its paper
+    numbers: records."""
     parts = module.split(".")[1:] or ["fmctd_dist"]
     if parts[0] != "families" or len(parts) == 1:
         return parts[0]
-    return "records" if parts[-1] == "record" else f"families.{parts[1]}"
+    return "records" if parts[-1] in RECORD_DATA else f"families.{parts[1]}"
 
 
 def rank_violations(graph: dict[str, set[str]]) -> list[str]:

@@ -40,8 +40,8 @@ def load_init_weights(ckpt_dir: str | Path, cfg: Config) -> tuple[dict[str, torc
             raise CheckpointError(f"train.init_from={ckpt_dir} models {saved_td} numbers per token but this config "
                                   f"has {cfg.token_dim} ({cfg.frame_dim} per frame x model.frame_stack={fs}); a DF "
                                   "model can only be widened to frames that add numbers after its own (e.g. "
-                                  "visual.plan_xy=true from a latent model): start from such a checkpoint, or from "
-                                  "scratch (train.init_from=)")
+                                  "positions appended to a latent model's frames): start from such a checkpoint, "
+                                  "or from scratch (train.init_from=)")
         state = widen_frames(state, old, cfg.frame_dim, fs)
         widened = {"widened_frames": {"from": old, "to": cfg.frame_dim}}
     provenance = {"path": str(ckpt_dir.relative_to(REPO_ROOT) if ckpt_dir.is_relative_to(REPO_ROOT) else ckpt_dir),

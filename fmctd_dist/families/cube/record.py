@@ -21,5 +21,6 @@ FAMILY = Family(
     data="fmctd_dist.families.cube.data",
     hint="The cube code: python jobs/make_dataset.py env=cube-single; python jobs/train.py env=cube-single "
          "jump=5; python jobs/train_policy.py env=cube-single; python jobs/eval.py env=cube-single",
-    tables=(Table("robot", CUBE_ENVS, METHODS, keyed_by_env(CUBE, "cube"), columns=tuple(f"cube {c}" for c in CUBE_TYPES)),),
+    tables=(Table("robot", CUBE_ENVS, METHODS, keyed_by_env(CUBE, "cube"),
+                  columns=tuple(f"cube {c}" for c in CUBE_TYPES)),),
 )

@@ -7,7 +7,8 @@ MAZES = ("medium", "large", "giant")
 POINT_ENVS = tuple(f"pointmaze-{m}" for m in MAZES)
 ANT_ENVS = tuple(f"antmaze-{m}" for m in MAZES)
 MAZE_KINDS = ("pointmaze", "antmaze")
-METHODS = ("diffuser", "diffuser-replan", "diffusion-forcing", "mctd", "p-mctd", "s-mctd", "fast-mctd")  # the paper's order
+# the paper's maze tables, in its order
+METHODS = ("diffuser", "diffuser-replan", "diffusion-forcing", "mctd", "p-mctd", "s-mctd", "fast-mctd")
 
 FAMILY = Family(
     name="maze",
@@ -21,5 +22,6 @@ FAMILY = Family(
          "env=pointmaze-medium jump=5; python jobs/eval.py env=pointmaze-medium",
     tables=(Table("maze", POINT_ENVS, METHODS, keyed_by_env(POINTMAZE, "pointmaze"),
                   columns=tuple(f"point {m}" for m in MAZES)),
-            Table("antmaze", ANT_ENVS, METHODS, keyed_by_env(ANTMAZE, "antmaze"), columns=tuple(f"ant {m}" for m in MAZES))),
+            Table("antmaze", ANT_ENVS, METHODS, keyed_by_env(ANTMAZE, "antmaze"),
+                  columns=tuple(f"ant {m}" for m in MAZES))),
 )
