@@ -184,3 +184,31 @@ def test_the_core_imports_no_family():
     wrong = sorted(f"{m} -> {t}" for m, ts in full_graph().items() for t in ts
                    if m.split(".")[1] in CORE and t.startswith("fmctd_dist.families"))
     assert not wrong, wrong
+
+
+def family_names_in_code(folders: tuple[str, ...] = ("search", "denoiser", "diffusion", "planners", "evaluation")) \
+        -> list[str]:
+    """Every token of the core's code (not a comment, not a docstring) that names one of our families."""
+    import io
+    import re
+    import tokenize
+
+    out = []
+    for d in folders:
+        for f in sorted((PACKAGE / d).rglob("*.py")):
+            src = f.read_text()
+            docs = set()
+            for n in ast.walk(ast.parse(src)):
+                body = getattr(n, "body", None)
+                if isinstance(n, (ast.Module, ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)) and body \
+                        and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant):
+                    docs |= set(range(body[0].lineno, body[0].end_lineno + 1))
+            for t in tokenize.generate_tokens(io.StringIO(src).readline):
+                if t.type != tokenize.COMMENT and t.start[0] not in docs and re.search("cube|visual|antmaze", t.string):
+                    out.append(f"{f.relative_to(PACKAGE)}:{t.start[0]}: {t.string[:60]}")
+    return out
+
+
+def test_the_core_names_no_family():
+    # issue 53: search, denoiser, diffusion, planners and evaluation name a family in comments and docstrings only
+    assert not family_names_in_code(), family_names_in_code()
