@@ -2,9 +2,9 @@
 
 A trace is a list of small dicts (JSON / parquet rows), one per ``denoise`` call: its shape (jobs,
 tokens, token dim, transitions), what the model did (model calls, micro-batches, guided jobs; per
-micro-batch its denoising and re-noising rows and whether it holds a guided job) and its seconds. A plan's trace is every call of one
-plan; ``jobs/bench/replay.py`` replays traces on any device to split a plan's time into the model's
-and the search's own (docs/design.md §6).
+micro-batch its denoising and re-noising rows and whether it holds a guided job) and its seconds.
+A plan's trace is every call of one plan; ``jobs/bench/replay.py`` replays traces on any device to
+split a plan's time into the model's and the search's own (docs/design.md §6).
 """
 
 from __future__ import annotations
