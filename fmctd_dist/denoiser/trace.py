@@ -58,24 +58,26 @@ def replay_batch(rec: dict, rng: np.random.Generator) -> DenoiseBatch:
 
 class TracingDenoiser:
     """Wraps a denoiser and records each call; :meth:`take` returns one :func:`call_record` per call, with
-    ``seconds`` (wall time of the call) and ``denoise_s`` (the inner's model time, ``denoise_time_s``).
+    ``seconds`` (wall time of the call), ``cpu_s`` (this process's CPU time in it: unlike wall time, not
+    stretched when other jobs share the cores) and ``denoise_s`` (the inner's model time, ``denoise_time_s``).
     Records are built in :meth:`take`, so a traced plan's time holds no tracing work beyond copying the levels."""
 
     def __init__(self, inner, micro_batch: int | None = None):
         self.inner = inner
         self.micro_batch = micro_batch or inner.micro_batch
-        self._calls: list[tuple[DenoiseBatch, float, float]] = []
+        self._calls: list[tuple[DenoiseBatch, float, float, float]] = []
 
     def denoise(self, batch: DenoiseBatch) -> DenoiseResult:
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         res = self.inner.denoise(batch)
-        seconds = time.perf_counter() - t0
-        self._calls.append((_shape_only(batch), seconds, float(res.denoise_time_s)))
+        seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
+        self._calls.append((_shape_only(batch), seconds, cpu, float(res.denoise_time_s)))
         return res
 
     def take(self) -> list[dict]:
         """The records of the calls since the last ``take`` (one plan's trace when called after each plan)."""
-        out = [{**call_record(b, self.micro_batch), "seconds": s, "denoise_s": d} for b, s, d in self._calls]
+        out = [{**call_record(b, self.micro_batch), "seconds": s, "cpu_s": c, "denoise_s": d}
+               for b, s, c, d in self._calls]
         self._calls = []
         return out
 
