@@ -1,0 +1,106 @@
+"""DenoiserPool: one in-process denoiser shared by many trees (threads), their jobs run together.
+
+A tree alone sends small calls (MCTD and S-MCTD: one job each), which leave a batched model idle.
+The pool batches continuously: a call runs at once when the pool is idle; calls that arrive while
+a round runs wait, and the next round takes all of them. A round groups its calls by shape
+(tokens, token dim, transitions, which optional fields are there), runs each group through the
+inner denoiser in the usual fixed micro-batches of ``micro_batch`` jobs, and hands each call its
+own rows. Since a job's bits do not depend on which jobs share its micro-batch (docs/design.md §7),
+every tree gets the bits it would get alone at the same ``micro_batch`` (docs/design.md §6).
+"""
+
+from __future__ import annotations
+
+import copy
+import threading
+import time
+from dataclasses import dataclass
+
+from fmctd_dist.denoiser.protocol import DenoiseBatch, DenoiseResult, concat_batches
+
+
+@dataclass
+class _Call:
+    batch: DenoiseBatch
+    arrived: float
+    result: DenoiseResult | None = None
+    error: BaseException | None = None
+
+
+def signature(b: DenoiseBatch) -> tuple:
+    """Calls with equal signatures stack exactly (``concat_batches`` pads and fills nothing)."""
+    return (b.x.shape[1:], b.levels.shape[1], b.start.shape[1:], b.noise_seed is None, b.guide_mask is None)
+
+
+class DenoiserPool:
+    """A Denoiser for many threads at once; ``inner.denoise(batch, micro_batch=M)`` runs one round's group
+    (a :class:`LocalDenoiser`, or anything that cuts micro-batches the same way)."""
+
+    def __init__(self, inner, micro_batch: int):
+        if micro_batch < 1:
+            raise ValueError(f"micro_batch={micro_batch} must be >= 1")
+        self.inner, self.micro_batch = inner, micro_batch
+        self._cv = threading.Condition()
+        self._waiting: list[_Call] = []
+        self._busy = False
+        self.rounds = 0
+
+    def denoise(self, batch: DenoiseBatch) -> DenoiseResult:
+        """This call's rows, bitwise as ``inner.denoise(batch, micro_batch=M)`` alone; stats add ``wait_s``
+        (queued before its round), ``round_calls`` / ``round_jobs`` and ``group_jobs`` (what ran with it)."""
+        call = _Call(batch, time.perf_counter())
+        with self._cv:
+            self._waiting.append(call)
+            while call.result is None and call.error is None and self._busy:
+                self._cv.wait()
+            calls = []
+            if call.result is None and call.error is None:  # idle pool: this thread runs the next round
+                calls, self._waiting, self._busy = self._waiting, [], True
+        if calls:
+            try:
+                self._round(calls)
+            finally:
+                with self._cv:
+                    for c in calls:  # an interrupted round (KeyboardInterrupt) must not leave anyone waiting
+                        if c.result is None and c.error is None:
+                            c.error = RuntimeError("the pool's round was interrupted")
+                    self._busy = False
+                    self.rounds += 1
+                    self._cv.notify_all()
+        if call.error is not None:
+            raise _own_copy(call.error)
+        return call.result
+
+    def _round(self, calls: list[_Call]) -> None:
+        start = time.perf_counter()
+        groups: dict[tuple, list[_Call]] = {}
+        for c in calls:
+            groups.setdefault(signature(c.batch), []).append(c)
+        jobs = sum(c.batch.size for c in calls)
+        done = []
+        try:
+            for group in groups.values():
+                batch = concat_batches([c.batch for c in group]) if len(group) > 1 else group[0].batch
+                res = self.inner.denoise(batch, micro_batch=self.micro_batch)
+                lo = 0
+                for c in group:
+                    hi = lo + c.batch.size
+                    share = res.denoise_time_s * c.batch.size / max(batch.size, 1)
+                    stats = {**res.stats, "wait_s": start - c.arrived, "round_calls": len(calls),
+                             "round_jobs": jobs, "group_jobs": batch.size}
+                    done.append((c, DenoiseResult(res.x[lo:hi], res.x0[lo:hi], share, res.retries, stats)))
+                    lo = hi
+        except Exception as e:  # noqa: BLE001 - it reaches every call of the round, in its own thread
+            for c in calls:
+                c.error = e
+            return
+        for c, r in done:
+            c.result = r
+
+
+def _own_copy(e: BaseException) -> BaseException:
+    """The round's exception for one waiting thread (several threads raising one object share its traceback)."""
+    try:
+        return copy.copy(e).with_traceback(e.__traceback__)
+    except Exception:  # noqa: BLE001 - an exception that cannot be copied is raised as it is
+        return e
