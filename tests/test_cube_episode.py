@@ -473,3 +473,23 @@ def test_ideal_plans_job_smoke(tiny_double, tmp_path):
                          capture_output=True, text=True, timeout=300, env={**os.environ, "OMP_NUM_THREADS": "1"})
     assert out.returncode == 0, out.stderr[-2000:]
     assert "task 1 seed 0:" in out.stdout and "episodes solved with ideal arc plans" in out.stdout
+
+
+def test_pooled_cube_episodes_give_the_lone_rows(tiny_double, tmp_path):
+    """eval.in_flight (issue 55) on the cube family: two episodes at once, their jobs pooled, the lone rows."""
+    from fmctd_dist.evaluation.grid import prepare, run_local
+    from fmctd_dist.evaluation.results import ResultStore
+
+    def grid(in_flight: int) -> dict:
+        cfg = load_config(["method=s-mctd-replan", *tiny_double, *SEARCH, "ray.micro_batch=2",
+                           f"eval.out={tmp_path}", f"eval.run=f{in_flight}", f"eval.in_flight={in_flight}",
+                           "tasks=[1,2]", "seeds=[0]", "env.max_steps=100", "env.replan_every=10", "eval.threads=1"])
+        got = run_local(prepare(cfg, hooks_for), ResultStore(cfg.eval.out, cfg.eval.run), progress=False,
+                        log=lambda s: None)
+        return {(r["task"], r["seed"]): r for r in got}
+
+    alone, pooled = grid(1), grid(2)
+    assert sorted(alone) == sorted(pooled) == [(1, 0), (2, 0)]
+    for key, r in alone.items():
+        for k in ("success", "env_steps", "plan_status", "targets", "traj_cubes", "why_failed", "expansions"):
+            assert pooled[key][k] == r[k], (key, k)

@@ -1,4 +1,4 @@
-"""Contract: through a DenoiserPool shared by N threads (trees), every tree gets the bits of its own calls run
+"""Contract: through a PooledDenoiser shared by N threads (trees), every tree gets the bits of its own calls run
 alone through the inner denoiser at the same micro-batch; errors reach every tree of their round; nothing is
 swapped between trees (docs/design.md §6-7). CPU, a small random-weight model, one torch thread."""
 
@@ -13,7 +13,7 @@ import torch
 
 from fmctd_dist.config import DiffusionConfig
 from fmctd_dist.denoiser.local import LocalDenoiser
-from fmctd_dist.denoiser.pool import DenoiserPool
+from fmctd_dist.denoiser.pool import PooledDenoiser
 from fmctd_dist.denoiser.protocol import DenoiseBatch, DenoiseResult
 from fmctd_dist.diffusion.model import DFTransformer
 
@@ -98,9 +98,9 @@ class Gate:
         return self.inner.denoise(batch, micro_batch=micro_batch)
 
 
-def gated_pool(inner, n: int) -> DenoiserPool:
+def gated_pool(inner, n: int) -> PooledDenoiser:
     gate = Gate(inner, n)
-    gate.pool = DenoiserPool(gate, M)
+    gate.pool = PooledDenoiser(gate, M)
     return gate.pool
 
 
@@ -161,7 +161,7 @@ def test_results_are_never_swapped_between_trees():
     rng = np.random.default_rng(2)
     trees = [[make_batch(rng, int(rng.integers(0, 6)), rows=int(rng.integers(2, 4))) for _ in range(20)]
              for _ in range(12)]
-    pool = DenoiserPool(Echo(), M)
+    pool = PooledDenoiser(Echo(), M)
     out = run_trees(pool, trees)
     for batches, results in zip(trees, out):
         for b, r in zip(batches, results):

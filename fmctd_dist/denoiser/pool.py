@@ -1,4 +1,4 @@
-"""DenoiserPool: one in-process denoiser shared by many trees (threads), their jobs run together.
+"""PooledDenoiser: one in-process denoiser shared by many trees (threads), their jobs run together.
 
 A tree alone sends small calls (MCTD and S-MCTD: one job each), which leave a batched model idle.
 The pool batches continuously: a call runs at once when the pool is idle; calls that arrive while
@@ -32,7 +32,7 @@ def signature(b: DenoiseBatch) -> tuple:
     return (b.x.shape[1:], b.levels.shape[1], b.start.shape[1:], b.noise_seed is None, b.guide_mask is None)
 
 
-class DenoiserPool:
+class PooledDenoiser:
     """A Denoiser for many threads at once; ``inner.denoise(batch, micro_batch=M)`` runs one round's group
     (a :class:`LocalDenoiser`, or anything that cuts micro-batches the same way)."""
 

@@ -10,6 +10,8 @@ hook module's functions, which pickle by reference, to the actors.
 
 from __future__ import annotations
 
+import threading
+from concurrent.futures import ThreadPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
@@ -140,8 +142,11 @@ def _successes(rows: list[dict[str, Any]]) -> str:
 
 def run_local(p: Prepared, store: ResultStore, progress: bool = True,
               log: Callable[[str], None] = print) -> list[dict[str, Any]]:
-    """All missing episodes of the grid in this process (LocalDenoiser, no Ray)."""
+    """All missing episodes of the grid in this process (LocalDenoiser, no Ray). ``eval.in_flight`` episodes run
+    at once, each in its own thread with its own env and tree, their denoiser calls pooled (PooledDenoiser) at the
+    configured micro-batch, so every row is the one a lone episode gets (docs/design.md §6)."""
     from fmctd_dist.denoiser.local import LocalDenoiser
+    from fmctd_dist.denoiser.pool import PooledDenoiser
     from fmctd_dist.diffusion.checkpoint import normaliser_from_manifest
     from fmctd_dist.planners import make_planner
 
@@ -150,21 +155,37 @@ def run_local(p: Prepared, store: ResultStore, progress: bool = True,
     if not todo:
         return []
     set_threads(cfg.eval.threads)
-    denoiser = LocalDenoiser.from_checkpoint(p.checkpoint, cfg, expect_digest=p.checkpoint_digest,
-                                             guide_map=p.guide_map)
-    manifest = read_manifest(p.checkpoint)
-    planner = make_planner(cfg, denoiser, normaliser_from_manifest(manifest), p.plan_rules(cfg),
-                           cfg.eval.episode_time_limit)
-    episodes = p.episodes(cfg)  # the family's env + controller, built once
-    same_policy(p, episodes)
-    rows = []
-    bar = tqdm(todo, desc=f"{cfg.method.name} {cfg.env.name}", unit="ep", disable=not progress)
-    ticker = PlanTicker(planner, bar)
-    for task, seed in bar:
-        ticker.start(task, seed, success=_successes(rows))
-        row = {**episodes.run(ticker, task, seed), **provenance(p, 0)}
+    inner = LocalDenoiser.from_checkpoint(p.checkpoint, cfg, expect_digest=p.checkpoint_digest,
+                                          guide_map=p.guide_map)
+    denoiser = inner if cfg.eval.in_flight == 1 else PooledDenoiser(inner, inner.micro_batch)
+    normaliser = normaliser_from_manifest(read_manifest(p.checkpoint))
+    bar = tqdm(total=len(todo), desc=f"{cfg.method.name} {cfg.env.name}", unit="ep", disable=not progress)
+    rows: list[dict[str, Any]] = []
+    mine = threading.local()  # per thread: the family's env + controller and a tree, built once
+
+    def episode(key: tuple[int, int]) -> dict[str, Any]:
+        if not hasattr(mine, "ticker"):
+            mine.episodes = p.episodes(cfg)
+            same_policy(p, mine.episodes)
+            mine.ticker = PlanTicker(make_planner(cfg, denoiser, normaliser, p.plan_rules(cfg),
+                                                  cfg.eval.episode_time_limit), bar)
+        mine.ticker.start(*key, success=_successes(rows))
+        return {**mine.episodes.run(mine.ticker, *key), **provenance(p, 0)}
+
+    def record(row: dict[str, Any]) -> None:
         store.write(row)
         rows.append(row)
+        bar.update()
         bar.set_postfix(success=_successes(rows))
         log(describe(row))
-    return rows
+
+    if cfg.eval.in_flight == 1:
+        for key in todo:
+            record(episode(key))
+    else:
+        with ThreadPoolExecutor(cfg.eval.in_flight, thread_name_prefix="episode") as pool:
+            for done in as_completed([pool.submit(episode, key) for key in todo]):
+                record(done.result())
+    bar.close()
+    order = {key: i for i, key in enumerate(todo)}
+    return sorted(rows, key=lambda r: order[(r["task"], r["seed"])])
