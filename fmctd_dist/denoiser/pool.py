@@ -14,6 +14,8 @@ from __future__ import annotations
 import copy
 import threading
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 
 from fmctd_dist.denoiser.protocol import DenoiseBatch, DenoiseResult, concat_batches
@@ -43,7 +45,22 @@ class PooledDenoiser:
         self._cv = threading.Condition()
         self._waiting: list[_Call] = []
         self._busy = False
+        self._planning = 0  # trees inside a plan (see planning()): a round waits for a call from each
         self.rounds = 0
+
+    @contextmanager
+    def planning(self) -> Iterator[None]:
+        """Around one tree's plan: while any tree is inside a plan, a round starts only once every such tree
+        waits on the pool, so one round holds a call of each (a tree between plans, e.g. stepping its env,
+        holds no one up). Without it the pool batches whatever has arrived (continuous batching)."""
+        with self._cv:
+            self._planning += 1
+        try:
+            yield
+        finally:
+            with self._cv:
+                self._planning -= 1
+                self._cv.notify_all()
 
     def denoise(self, batch: DenoiseBatch) -> DenoiseResult:
         """This call's rows, bitwise as ``inner.denoise(batch, micro_batch=M)`` alone; stats add ``wait_s``
@@ -51,7 +68,8 @@ class PooledDenoiser:
         call = _Call(batch, time.perf_counter())
         with self._cv:
             self._waiting.append(call)
-            while call.result is None and call.error is None and self._busy:
+            self._cv.notify_all()  # this call may complete the quorum a waiting thread is holding its round for
+            while call.result is None and call.error is None and (self._busy or len(self._waiting) < self._planning):
                 self._cv.wait()
             calls = []
             if call.result is None and call.error is None:  # idle pool: this thread runs the next round

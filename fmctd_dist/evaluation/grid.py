@@ -135,6 +135,18 @@ class PlanTicker:
         return out
 
 
+class InPool:
+    """A tree's planner whose plans tell the pool they run, so each round waits for a call of every planning tree
+    (:meth:`PooledDenoiser.planning`)."""
+
+    def __init__(self, planner: Any, pool: Any):
+        self.planner, self.pool = planner, pool
+
+    def plan(self, start: Any, goal: Any, seed: int) -> Any:
+        with self.pool.planning():
+            return self.planner.plan(start, goal, seed)
+
+
 def _successes(rows: list[dict[str, Any]]) -> str:
     """``solved/done`` of the episodes this run has finished, for the progress bar."""
     return f"{sum(r['success'] for r in rows)}/{len(rows)}"
@@ -167,8 +179,8 @@ def run_local(p: Prepared, store: ResultStore, progress: bool = True,
         if not hasattr(mine, "ticker"):
             mine.episodes = p.episodes(cfg)
             same_policy(p, mine.episodes)
-            mine.ticker = PlanTicker(make_planner(cfg, denoiser, normaliser, p.plan_rules(cfg),
-                                                  cfg.eval.episode_time_limit), bar)
+            planner = make_planner(cfg, denoiser, normaliser, p.plan_rules(cfg), cfg.eval.episode_time_limit)
+            mine.ticker = PlanTicker(planner if denoiser is inner else InPool(planner, denoiser), bar)
         mine.ticker.start(*key, success=_successes(rows))
         return {**mine.episodes.run(mine.ticker, *key), **provenance(p, 0)}
 
