@@ -44,3 +44,20 @@ def test_pooled_rows_equal_lone_rows(tiny_checkpoint, tmp_path, method, monkeypa
             if field in r:
                 assert r[field] == pooled[key][field], (key, field)
     assert max(rounds) > 1  # the episodes really shared rounds: some round held several trees' calls
+
+
+def test_a_run_never_mixes_micro_batches(tiny_checkpoint, tmp_path):
+    """ray.micro_batch shapes bits but sits outside the config hash: rows record it, and a run holding rows of
+    another micro-batch refuses to resume (one ResultsError naming the field)."""
+    from fmctd_dist.errors import ResultsError
+
+    args, _ = tiny_checkpoint
+    words = args + ["method=mctd", "method.budget=6", "method.early_stop=false"]
+    cfg = load_config(words + [f"eval.out={tmp_path}", "eval.run=r", "runner=local", "tasks=[1]", "seeds=[0]",
+                               "ray.micro_batch=1", "eval.threads=1"])
+    got = run_local(prepare(cfg, hooks_for), ResultStore(tmp_path, "r"), progress=False, log=lambda s: None)
+    assert got[0]["micro_batch"] == 1 and got[0]["in_flight"] == 1
+    cfg = load_config(words + [f"eval.out={tmp_path}", "eval.run=r", "runner=local", "tasks=[1]", "seeds=[0,1]",
+                               "ray.micro_batch=4", "eval.threads=1"])
+    with pytest.raises(ResultsError, match="ray.micro_batch: 1 there, 4 now"):
+        run_local(prepare(cfg, hooks_for), ResultStore(tmp_path, "r"), progress=False, log=lambda s: None)

@@ -80,6 +80,7 @@ class DenoiserActor:
                                       "niceness": os.nice(0)}
         self._error: FmctdError | None = None
         self._denoiser = None
+        self._pool = None  # eval.in_flight > 1: segments that arrive together share model calls
         try:
             if device.startswith("cuda") and (not ray.get_gpu_ids() or torch.cuda.device_count() == 0):
                 raise DeviceError(
@@ -89,6 +90,10 @@ class DenoiserActor:
                 )
             self._denoiser = LocalDenoiser.from_checkpoint(checkpoint, cfg, device=device, expect_digest=digest,
                                                            warn=False, guide_map=guide_map)
+            if cfg.eval.in_flight > 1:  # concurrent segments of several trees run together (a threaded actor)
+                from fmctd_dist.denoiser.pool import PooledDenoiser
+
+                self._pool = PooledDenoiser(self._denoiser, cfg.ray.micro_batch)
             self._info["device"] = str(self._denoiser.device)
             # an emulated-bf16 warning goes back to the job process, which says it (actors print nothing)
             self._info["warning"] = (bf16_warning(self._denoiser.device, "diffusion.precision")
@@ -107,6 +112,8 @@ class DenoiserActor:
         them), run one micro-batch per model call as the caller cut them."""
         if self._error is not None:
             raise self._error
+        if self._pool is not None and micro_batch == self._pool.micro_batch:
+            return self._pool.denoise(batch)  # bitwise what the segment gets alone (docs/design.md §6)
         return self._denoiser.denoise(batch, micro_batch=micro_batch)
 
 
@@ -269,7 +276,9 @@ class DenoiserPool:
         if n < 1:
             raise DeviceError(f"ray.denoiser_actors={n} must be >= 1")
         opts = {"num_cpus": cfg.ray.num_cpus, "num_gpus": cfg.ray.num_gpus,
-                "max_restarts": cfg.ray.max_restarts, "max_task_retries": 0}
+                "max_restarts": cfg.ray.max_restarts, "max_task_retries": 0,
+                # eval.in_flight trees per actor send segments at once: a threaded actor pools them
+                "max_concurrency": max(1, 2 * cfg.eval.in_flight) if cfg.eval.in_flight > 1 else 1}
         # max_task_retries=0: RayDenoiser re-routes a failed micro-batch itself (to a live actor, counted)
         actors = [DenoiserActor.options(**opts).remote(str(prepared.checkpoint), prepared.checkpoint_digest,
                                                        cfg.to_dict(), prepared.device, prepared.guide_map)

@@ -91,11 +91,17 @@ def missing(p: Prepared, store: ResultStore, log: Callable[[str], None] = print)
     for line in store.report():
         log(line)
     key = (p.config_hash, p.checkpoint_digest, p.policy_digest)
+    # ray.micro_batch shapes bits (on the sparse models even at one torch thread) though the hash leaves the ray
+    # section out: rows that record it must have this run's
+    m = cfg.ray.micro_batch
     foreign = [r for r in rows
-               if (r.get("config_hash"), r.get("checkpoint_digest"), r.get("policy_digest") or "") != key]
+               if (r.get("config_hash"), r.get("checkpoint_digest"), r.get("policy_digest") or "") != key
+               or r.get("micro_batch", m) != m]
     if foreign:
         diffs = list(dict.fromkeys(d for r in foreign for d in differences(r, cfg, p.checkpoint_digest,
                                                                                 p.policy_digest)))
+        diffs += [f"ray.micro_batch: {r['micro_batch']} there, {m} now" for r in foreign[:1]
+                  if r.get("micro_batch", m) != m]
         raise ResultsError(
             f"{store.root / cfg.method.name / cfg.env.name} holds {len(foreign)} row(s) from another config or "
             f"checkpoint: {'; '.join(diffs[:12])}{' ...' if len(diffs) > 12 else ''}. Write to a new run with "
@@ -112,7 +118,8 @@ def provenance(p: Prepared, n_actors: int) -> dict[str, Any]:
             "parallel": m.parallel, "virtual_weight": m.virtual_weight, "redundancy_aware": m.redundancy_aware,
             "leaf_parallel": m.leaf_parallel, "jump": p.cfg.jump, "budget": m.budget,
             "episode_time_limit": p.cfg.eval.episode_time_limit,
-            "precision": p.cfg.diffusion.precision, "compiled": p.cfg.diffusion.compile}
+            "precision": p.cfg.diffusion.precision, "compiled": p.cfg.diffusion.compile,
+            "micro_batch": p.cfg.ray.micro_batch, "in_flight": p.cfg.eval.in_flight}
 
 
 class PlanTicker:

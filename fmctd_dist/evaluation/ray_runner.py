@@ -177,12 +177,13 @@ def pool_size(p: Prepared) -> tuple[int, int]:
     """(denoiser actors, env actors) for the cluster we are connected to.
 
     ``ray.denoiser_actors=0`` (the default) gives one actor per GPU (``ray.num_gpus`` each) or per
-    ``ray.num_cpus`` CPUs the cluster has, so no core sits idle; ``ray.env_actors=0`` runs as many
-    episodes at once as there are denoiser actors (more would queue on them). Explicit values win.
+    ``ray.num_cpus`` CPUs the cluster has, so no core sits idle; ``ray.env_actors=0`` runs ``eval.in_flight``
+    episodes at once per denoiser actor (one: more would queue on them; several: their jobs are pooled).
+    Explicit values win.
     """
     r = p.cfg.ray
     n = r.denoiser_actors or auto_actors(r)
-    return n, r.env_actors or n
+    return n, r.env_actors or n * p.cfg.eval.in_flight
 
 
 def check_cluster(p: Prepared, n_actors: int) -> None:
