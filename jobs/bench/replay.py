@@ -40,7 +40,7 @@ from fmctd_dist.diffusion.checkpoint import (
 )
 from fmctd_dist.errors import ConfigError
 from fmctd_dist.evaluation.grid import prepare
-from fmctd_dist.family import guide_map_for, hooks_for
+from fmctd_dist.families import guide_map, hooks_for, plan_rules
 from fmctd_dist.planners import make_planner
 
 METHODS = ["mctd", "p-mctd", "s-mctd", "fast-mctd"]
@@ -84,14 +84,15 @@ def denoiser(cfg, weights: str, device: str) -> LocalDenoiser:
         manifest = read_manifest(path, cfg)
         torch.manual_seed(0)
         model = model_from_manifest(manifest)
+    guide = guide_map(cfg.env.name)  # the family's guidance space (the visual maze), else None
     return LocalDenoiser(model, cfg.diffusion, device, cfg.ray.micro_batch, manifest["digest"],
-                         guide_map_for(cfg, manifest))
+                         None if guide is None else guide(cfg, manifest))
 
 
 def record(method: str, overrides: list[str], task: int, seed: int) -> dict:
     """One traced plan of ``method``: its trace, plan and denoise seconds, and how it ran."""
     cfg = load_config(overrides + [f"method={method}"])
-    prepared = prepare(cfg)
+    prepared = prepare(cfg, hooks_for)
     set_threads(cfg.eval.threads)
     local = denoiser(cfg, "real", cfg.device)
     traced = TracingDenoiser(local)
@@ -99,7 +100,7 @@ def record(method: str, overrides: list[str], task: int, seed: int) -> dict:
     episodes = hooks_for(cfg.env.name).episodes(cfg)
     # the warm-up plan runs its first call only (lazy initialisation is not planning time); then the timed plan
     for den in (FirstCall(local), traced):
-        planner = FirstPlan(make_planner(cfg, den, normaliser, cfg.eval.episode_time_limit))
+        planner = FirstPlan(make_planner(cfg, den, normaliser, plan_rules(cfg), cfg.eval.episode_time_limit))
         try:
             episodes.run(planner, task, seed)
         except _Planned:
