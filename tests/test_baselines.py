@@ -9,7 +9,8 @@ from fmctd_dist.families import plan_rules
 from fmctd_dist.families.maze.make import make_env
 from fmctd_dist.families.maze.episode import run_episode
 from fmctd_dist.planners import PlanOutput, make_planner
-from fmctd_dist.planners.diffusion_forcing import DiffusionForcingPlanner
+from fmctd_dist.diffusion.schedule import PyramidSchedule
+from fmctd_dist.planners.fixed import FixedSchedulePlanner
 
 
 class CountingPlanner:
@@ -40,7 +41,8 @@ def test_diffusion_forcing_planner(tiny_checkpoint, one_torch_thread):
     model, manifest = load_checkpoint(ckpt, cfg)
     denoiser = LocalDenoiser(model, cfg.diffusion, "cpu", micro_batch=4)
     planner = make_planner(cfg, denoiser, normaliser_from_manifest(manifest), plan_rules(cfg))
-    assert isinstance(planner, DiffusionForcingPlanner)
+    assert isinstance(planner, FixedSchedulePlanner)
+    assert np.array_equal(planner.levels, PyramidSchedule(cfg.plan_tokens, cfg.diffusion.levels).full())
     a = planner.plan(np.zeros(2), np.array([20.0, 20.0]), seed=3)
     b = planner.plan(np.zeros(2), np.array([20.0, 20.0]), seed=3)
     c = planner.plan(np.zeros(2), np.array([20.0, 20.0]), seed=4)

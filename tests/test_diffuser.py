@@ -27,7 +27,7 @@ from fmctd_dist.diffusion.train import DiffuserLoss, train
 from fmctd_dist.diffusion.unet import TemporalUnet
 from fmctd_dist.errors import CheckpointError, ConfigError
 from fmctd_dist.planners import make_planner
-from fmctd_dist.planners.diffuser import DiffuserPlanner, uniform_levels
+from fmctd_dist.planners.fixed import FixedSchedulePlanner, uniform_levels
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
@@ -238,7 +238,8 @@ def test_guidance_scale_zero_equals_unguided(diffuser_checkpoint):
 def test_planner_is_deterministic_per_seed(diffuser_checkpoint):
     den, cfg, manifest = denoiser_and_cfg(diffuser_checkpoint)
     planner = make_planner(cfg, den, normaliser_from_manifest(manifest), plan_rules(cfg))
-    assert isinstance(planner, DiffuserPlanner)
+    assert isinstance(planner, FixedSchedulePlanner)
+    assert np.array_equal(planner.levels, uniform_levels(cfg.plan_tokens, cfg.diffusion.levels, cfg.method.resample))
     a = planner.plan(np.array([1.0, 1.0]), GOAL, seed=3)
     b = planner.plan(np.array([1.0, 1.0]), GOAL, seed=3)
     c = planner.plan(np.array([1.0, 1.0]), GOAL, seed=4)

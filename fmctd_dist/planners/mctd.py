@@ -1,9 +1,10 @@
 """MCTD, P-MCTD, S-MCTD and Fast-MCTD: one search loop, four configs.
 
 K (``method.parallel``), w, RAS, leaf parallelisation and H (``jump``, which also picks the
-sparse checkpoint) are config; this class only wires the schedule, codec and denoiser into
-:func:`fmctd_dist.search.search`, with the action set and plan value the env family's plan rules give for
-each call (handed in by the caller), and expands a sparse plan to one waypoint per env step.
+sparse checkpoint) are config, read once by :func:`fmctd_dist.planners.make_planner`; this class only wires the
+schedule, codec and denoiser into :func:`fmctd_dist.search.search`, with the action set and plan value the env
+family's plan rules give for each call (handed in by the caller), and expands a sparse plan to one waypoint per
+env step.
 """
 
 from __future__ import annotations
@@ -12,26 +13,19 @@ import time
 
 import numpy as np
 
-from fmctd_dist.config import Config
-from fmctd_dist.planners.base import repeat_waypoints
-from fmctd_dist.tokens import Normaliser, PlanCodec
 from fmctd_dist.denoiser.protocol import Denoiser
 from fmctd_dist.diffusion.schedule import PyramidSchedule
 from fmctd_dist.family import PlanRules
-from fmctd_dist.planners.base import PlanOutput
+from fmctd_dist.planners.base import PlanOutput, repeat_waypoints
 from fmctd_dist.search.loop import SearchParams, search
+from fmctd_dist.tokens import PlanCodec
 
 
 class MCTDPlanner:
-    def __init__(self, cfg: Config, denoiser: Denoiser, normaliser: Normaliser, rules: PlanRules,
-                 time_limit_s: float = 0.0):
-        m = cfg.method
-        self.cfg = cfg
-        self.denoiser = denoiser
-        self.schedule = PyramidSchedule(cfg.plan_tokens, cfg.diffusion.levels, m.segment_transitions, m.sim_skip)
-        self.codec = PlanCodec(normaliser, cfg.model.frame_stack)
-        self.params = SearchParams.from_method(m, time_limit_s=time_limit_s, clip_noise=cfg.diffusion.clip_noise)
-        self.rules = rules
+    def __init__(self, denoiser: Denoiser, schedule: PyramidSchedule, codec: PlanCodec, params: SearchParams,
+                 rules: PlanRules, jump: int):
+        self.denoiser, self.schedule, self.codec, self.params = denoiser, schedule, codec, params
+        self.rules, self.jump = rules, jump
         self.last_result = None  # the SearchResult of the last call (tree, per-iteration stats)
 
     def plan(self, start: np.ndarray, goal: np.ndarray, seed: int) -> PlanOutput:
@@ -42,7 +36,7 @@ class MCTDPlanner:
                    actions=actions, value=value)
         self.last_result = r
         return PlanOutput(
-            waypoints=repeat_waypoints(r.plan, self.cfg.jump),
+            waypoints=repeat_waypoints(r.plan, self.jump),
             status=r.status,
             plan_time_s=time.perf_counter() - t0,
             denoise_time_s=r.denoise_time_s,

@@ -31,7 +31,7 @@ from fmctd_dist.denoiser.protocol import DenoiseBatch
 from fmctd_dist.diffusion.checkpoint import load_checkpoint, normaliser_from_manifest
 from fmctd_dist.diffusion.schedule import PyramidSchedule
 from fmctd_dist.families.maze.geometry import maze_geometry
-from fmctd_dist.planners.diffuser import uniform_levels
+from fmctd_dist.planners.fixed import uniform_levels
 
 SAMPLES_PER_TASK = 20
 GOAL_RADIUS = 2.0  # "within 2.0 of the goal": the value function's goal radius
