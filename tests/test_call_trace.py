@@ -81,7 +81,7 @@ def test_the_replay_benchmark_records_replays_and_writes_its_table(tiny_checkpoi
     assert replay.main([*args, f"out={tmp_path}", "mode=replay", "weights=random", "methods=[mctd,fast-mctd]",
                         "batch=call", f"report={tmp_path / 'r'}"]) == 0
     assert "| mctd |" in capsys.readouterr().out
-    rows = json.loads((tmp_path / "r" / "replay-cpu-call.json").read_text())
+    rows = json.loads((tmp_path / "r" / "pointmaze-medium" / "replay-cpu-call.json").read_text())
     assert [r["method"] for r in rows] == ["mctd", "fast-mctd"] and all(r["replay_s"] > 0 for r in rows)
     # and project onto the H200 table without a model
     assert replay.main([f"out={tmp_path}", "mode=project"]) == 0

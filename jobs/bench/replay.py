@@ -18,8 +18,9 @@ call's shape and model work (random tokens, the same levels pattern, the same gu
 architecture on ``device=``, at the recorded micro-batch (``batch=trace``, the default) or each call as one batch
 of all its jobs (``batch=call``: the paper's GPU setting, 200 rollouts in one batch). ``mode=both`` (the
 default) does both, a plan then its replay, ``rounds=2`` times (the fastest of each counts, so a change in the
-machine's load hits both alike). The table, printed and written (with a JSON of its rows) to
-``<report>/replay-<device>[-call].md`` (default ``report=<out>/<env>``), gives per method: measured plan time,
+machine's load hits both alike); ``envs=[a,b]`` runs each env in turn (one process: one CUDA start). The table,
+printed and written (with a JSON of its rows) to ``replay-<device>[-call].md`` in ``<out>/<env>`` (or in
+``<report>/<env>`` when ``report=`` is given), gives per method: measured plan time,
 the search's own overhead (plan - denoise), the replayed denoiser time, the replayed plan time (replayed
 denoiser + measured overhead) and replayed / measured, which on the recording CPU should be ~1 (within 10%).
 ``mode=project`` needs no model: for every ``<out>/<env>`` folder (or ``envs=[...]``) it prices each stored
@@ -269,6 +270,13 @@ def main(argv: list[str]) -> int:
     given = {o.partition("=")[0] for o in overrides}
     overrides += [o for o in DRY_RUN if dry and o.partition("=")[0] not in given]
     words["rounds"] = "1" if dry and not any(a.startswith("rounds=") for a in argv) else words["rounds"]
+    for env in words_list(words["envs"]) or [""]:  # one env (``env=``, or the default), or each of ``envs=``
+        run_env(overrides + [f"env={env}"] * bool(env), methods, words)
+    return 0
+
+
+def run_env(overrides: list[str], methods: list[str], words: dict[str, str]) -> None:
+    """``mode=record|replay|both`` of ``methods`` on the env ``overrides`` name (main's docstring)."""
     cfg = load_config(overrides)
     folder = Path(words["out"]) / cfg.env.name
     rows, mode, batch, calls = [], words["mode"], words["batch"], int(words["calls"])
@@ -293,11 +301,10 @@ def main(argv: list[str]) -> int:
         if mode != "record":
             rows.append({"trace": best, "replay_s": replayed[0], "replay_cpu_s": replayed[1]})
             # written after each method: a run stopped by a time limit keeps the rows it finished
-            write_report(rows, Path(words["report"]) if words["report"] else folder, cfg.device, words["weights"],
-                         batch, calls)
+            write_report(rows, Path(words["report"]) / cfg.env.name if words["report"] else folder, cfg.device,
+                         words["weights"], batch, calls)
     if rows:
         print(table(rows, cfg.device, words["weights"], batch, calls))
-    return 0
 
 
 def write_report(rows: list[dict], report: Path, device: str, weights: str, batch: str, calls: int) -> None:
