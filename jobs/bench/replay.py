@@ -198,17 +198,18 @@ def projection_tables(traces: dict[str, dict[str, dict]]) -> str:
              "tokens and batch; + the search's own CPU seconds as recorded. CPU seconds are this process's "
              "(one torch thread).", "",
              "| maze | MCTD: CPU plan (s) | Fast-MCTD: CPU plan (s) | CPU ratio | projected MCTD (s) | "
-             "projected Fast-MCTD (s) | projected ratio | paper (GPU) |", "|---" * 8 + "|"]
+             "projected Fast-MCTD (s) | projected ratio | Fast-MCTD at its recorded M: projected (s), ratio | "
+             "paper (GPU) |", "|---" * 9 + "|"]
     for env, by in traces.items():
         if not {"mctd", "fast-mctd"} <= by.keys():
             continue
         m, f = by["mctd"], by["fast-mctd"]
-        pm, pf = project(m)["plan_s"], project(f)["plan_s"]
+        pm, pf, pt = project(m)["plan_s"], project(f)["plan_s"], project(f, "trace")["plan_s"]
         qm, qf = paper_seconds(env, "mctd"), paper_seconds(env, "fast-mctd")
         paper = f"{qm} / {qf} = {ratio(qm, qf)}" if qm and qf else "–"
         lines.append(f"| {env} | {m['plan_cpu_s']:.1f} | {f['plan_cpu_s']:.2f} | "
                      f"{ratio(m['plan_cpu_s'], f['plan_cpu_s'])} | {pm:.2f} | {pf:.2f} | **{ratio(pm, pf)}** | "
-                     f"{paper} |")
+                     f"{pt:.2f}, {ratio(pm, pt)} | {paper} |")
     lines += ["", "| maze | method | status | calls | jobs | tokens | model calls: recorded M / one batch per call "
               "| CPU plan (s) | search, CPU (s) | projected model (s): per call / at recorded M | "
               "projected plan (s) | paper (s) |", "|---" * 12 + "|"]
