@@ -13,7 +13,7 @@ from conftest import load_job
 from fmctd_dist.config import DiffusionConfig
 from fmctd_dist.denoiser.local import LocalDenoiser
 from fmctd_dist.denoiser.protocol import DenoiseBatch
-from fmctd_dist.denoiser.trace import TracingDenoiser, call_record, replay_batch
+from fmctd_dist.denoiser.trace import TracingDenoiser, as_one_batch, call_record, load_trace, replay_batch
 from fmctd_dist.diffusion.model import DFTransformer
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
@@ -59,6 +59,11 @@ def test_a_trace_says_what_ran_and_a_replay_batch_makes_the_same_model_work():
                   "guided_mbs"]
         assert {k: call_record(again, M)[k] for k in fields} == {k: rec[k] for k in fields}
         assert local.denoise(again).stats["model_calls"] == rec["model_calls"]
+        # the same call as one batch of all its jobs (a GPU's micro-batch) makes the whole call's model calls
+        assert max(rec["down_rows"], default=0) <= rec["call_down_rows"] <= rec["model_calls"]
+        one = as_one_batch(rec)
+        made = local.denoise(replay_batch(one, np.random.default_rng(2)), micro_batch=one["micro_batch"])
+        assert made.stats["model_calls"] == one["model_calls"] == rec["call_down_rows"]
     assert trace[2]["up_rows"] == [1, 1] and trace[2]["seeded"]
     assert trace[1]["guided_mbs"] == [1, 0, 0] and trace[0]["model_calls"] == 4  # its last row moves no token
 
@@ -72,6 +77,14 @@ def test_the_replay_benchmark_records_replays_and_writes_its_table(tiny_checkpoi
         assert f"| {m} |" in table
         trace = json.loads((tmp_path / "pointmaze-medium" / f"{m}.json").read_text())
         assert trace["calls"] and trace["plan_s"] >= trace["denoise_s"] > 0
-    # the stored traces replay on their own, with random weights of the same architecture
-    assert replay.main([*args, f"out={tmp_path}", "mode=replay", "weights=random", "methods=[mctd]"]) == 0
+    # the stored traces replay on their own, with random weights of the same architecture, each call as one batch
+    assert replay.main([*args, f"out={tmp_path}", "mode=replay", "weights=random", "methods=[mctd,fast-mctd]",
+                        "batch=call", f"report={tmp_path / 'r'}"]) == 0
     assert "| mctd |" in capsys.readouterr().out
+    rows = json.loads((tmp_path / "r" / "pointmaze-medium" / "replay-cpu-call.json").read_text())
+    assert [r["method"] for r in rows] == ["mctd", "fast-mctd"] and all(r["replay_s"] > 0 for r in rows)
+    # and project onto the H200 table without a model
+    assert replay.main([f"out={tmp_path}", "mode=project"]) == 0
+    projection = (tmp_path / "projection.md").read_text()
+    assert "Projection" in projection and "| pointmaze-medium | mctd |" in projection
+    assert load_trace(tmp_path / "pointmaze-medium", "fast-mctd")["method"] == "fast-mctd"

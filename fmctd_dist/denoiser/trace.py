@@ -9,7 +9,10 @@ split a plan's time into the model's and the search's own (docs/design.md §6).
 
 from __future__ import annotations
 
+import gzip
+import json
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -19,15 +22,17 @@ from fmctd_dist.denoiser.protocol import DenoiseBatch, DenoiseResult, micro_batc
 def call_record(batch: DenoiseBatch, micro_batch: int) -> dict:
     """The shape of one call cut into micro-batches of ``micro_batch`` jobs, and per micro-batch what its model
     work is: rows where a job goes down (one model call each, as ``run_levels`` runs them), rows that re-noise,
-    whether a job is guided (a guided micro-batch also runs the gradient)."""
+    whether a job is guided (a guided micro-batch also runs the gradient). ``call_down_rows``: the model calls of
+    the whole call run as one batch (a GPU's micro-batch; the projection in ``denoiser.projection`` reads it)."""
     b, t, d = batch.x.shape
     guided = batch.scale != 0
     cut = micro_batch_indices(b, micro_batch)
     step = [np.diff(batch.levels[i], axis=1) for i in cut]  # per micro-batch [M, R, T]
     down = [int((s < 0).any(axis=(0, 2)).sum()) for s in step]
+    whole = int((np.diff(batch.levels, axis=1) < 0).any(axis=(0, 2)).sum()) if b else 0
     return {"jobs": b, "tokens": t, "token_dim": d, "state_dim": int(batch.start.shape[1]),
             "transitions": int(batch.levels.shape[1]) - 1, "micro_batch": micro_batch, "micro_batches": len(cut),
-            "model_calls": sum(down), "guided": int(guided.sum()), "down_rows": down,
+            "model_calls": sum(down), "guided": int(guided.sum()), "down_rows": down, "call_down_rows": whole,
             "up_rows": [int((s > 0).any(axis=(0, 2)).sum()) for s in step],
             "guided_mbs": [int(guided[i].any()) for i in cut],
             "seeded": batch.noise_seed is not None, "masked": batch.guide_mask is not None}
@@ -54,6 +59,17 @@ def replay_batch(rec: dict, rng: np.random.Generator) -> DenoiseBatch:
                         rng.standard_normal((b, state)).astype(np.float32),
                         np.arange(b, dtype=np.int64) if rec["seeded"] or any(rec["up_rows"]) else None,
                         np.ones((b, state), np.float32) if rec["masked"] else None)
+
+
+def as_one_batch(rec: dict) -> dict:
+    """The record of the same call run as one micro-batch of all its jobs (a GPU's setting: a call of 200 rollouts
+    is one batch of 200): ``replay_batch`` of it, run at ``micro_batch=rec["micro_batch"]``, makes the whole
+    call's model calls, ``call_down_rows`` (every job on one levels path; up rows: the most of any micro-batch)."""
+    down = rec.get("call_down_rows", max(rec["down_rows"], default=0))
+    n = int(rec["jobs"] > 0)  # micro-batches: one, or none for a call of no jobs
+    return {**rec, "micro_batch": max(rec["jobs"], 1), "micro_batches": n, "model_calls": down * n,
+            "down_rows": [down][:n], "up_rows": [max(rec["up_rows"], default=0)][:n],
+            "guided_mbs": [int(rec["guided"] > 0)][:n], "call_down_rows": down}
 
 
 class TracingDenoiser:
@@ -89,3 +105,13 @@ def _shape_only(b: DenoiseBatch) -> DenoiseBatch:
 
     return DenoiseBatch(zero(b.x), b.levels.copy(), b.scale.copy(), zero(b.start), zero(b.goal), zero(b.noise_seed),
                         zero(b.guide_mask))
+
+
+def load_trace(folder: Path, method: str) -> dict | None:
+    """A stored plan trace, ``<folder>/<method>.json`` or gzipped ``.json.gz`` (the large committed ones in
+    ``jobs/bench/traces``); None when there is none."""
+    for path, opener in ((folder / f"{method}.json", open), (folder / f"{method}.json.gz", gzip.open)):
+        if path.exists():
+            with opener(path, "rt") as f:
+                return json.load(f)
+    return None
