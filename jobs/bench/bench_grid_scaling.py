@@ -99,14 +99,9 @@ def parse_setting(text: str) -> Setting:
 
 def own_words(argv: list[str]) -> tuple[dict[str, str], list[str]]:
     """This bench's words with their defaults, and the user's config words."""
-    mine, rest = dict(OWN), []
-    for a in argv:
-        key, sep, value = a.partition("=")
-        if sep and key in mine:
-            mine[key] = value
-        else:
-            rest.append(a)
-    return mine, rest
+    split = [a.partition("=") for a in argv]
+    mine = {**OWN, **{key: value for key, sep, value in split if sep and key in OWN}}
+    return mine, [a for a, (key, sep, _) in zip(argv, split) if not (sep and key in OWN)]
 
 
 def with_defaults(words: list[str]) -> list[str]:
