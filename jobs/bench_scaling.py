@@ -11,7 +11,8 @@ inside denoiser calls (wall time of the calls, seen by the tree owner), and the 
 per search iteration = (wall time in denoiser calls - model time / N) / iterations, i.e.
 what the calls cost beyond the model work when the N actors split it evenly. All plans
 are checked to be bitwise identical to the in-process one. Prints a Markdown table.
-Actors started here share this machine's cores (and its one device, if any).
+Actors started here share this machine's cores (and its one device, if any). A whole grid of episodes against env
+actors x denoiser actors x eval.in_flight, locally and on simulated nodes: jobs/bench/bench_grid_scaling.py.
 """
 
 from __future__ import annotations
