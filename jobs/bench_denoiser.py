@@ -15,9 +15,9 @@ checkpoints: all tokens denoised together, start inpainted): share of plans
 without a warp (a step over 0.75 + 0.25 H: the authors' 1.0 dense, 2.0 at H=5), share of plan points inside free
 maze cells, share of plans "valid" (no warp, and no step crosses a wall: the value's warp test
 sees only the first), share of guided plans that come within 2.0 of the goal. These say whether a
-search has anything to work with (the measurements live in fmctd_dist.families.maze.plan_quality,
+search has anything to work with (the measurements live in jobs/bench/plan_quality.py,
 shared with jobs/bench/bench_recipe.py). Cube models get their own table
-(fmctd_dist.families.cube.quality: unguided plans from 100 validation starts beside the data's
+(plan_quality.cube_plan_quality: unguided plans from 100 validation starts beside the data's
 own windows). Throughput: guided DDIM transitions per second.
 """
 
@@ -35,12 +35,14 @@ from fmctd_dist.cli import run
 from fmctd_dist.config import REPO_ROOT, Config, apply_override, config_from_dict, validate
 from fmctd_dist.denoiser.runtime import option_settings
 from fmctd_dist.diffusion.model import DFTransformer
-from fmctd_dist.families.maze.plan_quality import SAMPLES_PER_TASK, plan_quality, precision
 from fmctd_dist.registry import family
+
+sys.path.insert(0, str(Path(__file__).resolve().parent / "bench"))  # the measurements: jobs/bench/plan_quality.py
+from plan_quality import SAMPLES_PER_TASK, cube_plan_quality, plan_quality, precision  # noqa: E402
 
 
 def precision_lines(ckpt: Path, batch: int = 64, timesteps: tuple[int, ...] = ()) -> list[str]:
-    """The precision table of one checkpoint (fmctd_dist.families.maze.plan_quality.precision) as markdown."""
+    """The precision table of one checkpoint (plan_quality.precision) as markdown."""
     p = precision(ckpt, batch, timesteps)
     d = p["data"]
     lines = [f"{p['checkpoint']}: {batch} validation windows; data steps: boundary mean {d['boundary_mean']:.3f} "
@@ -78,9 +80,7 @@ def checkpoint_config(ckpt: Path, overrides: list[str]) -> Config | None:
 
 
 def cube_lines(ckpts: list[Path], overrides: list[str] = ()) -> list[str]:
-    """The cube quality table (fmctd_dist.families.cube.quality) as markdown: model plans, then the data's."""
-    from fmctd_dist.families.cube.quality import cube_plan_quality
-
+    """The cube quality table (plan_quality.cube_plan_quality) as markdown: model plans, then the data's."""
     lines = ["| checkpoint | steps | val loss | train h | warp | plans of | no warp | cubes supported at the end | "
              "at most one cube moved | some cube moved | boundary / inside step | largest step |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|"]

@@ -204,7 +204,7 @@ def test_clear_errors_for_missing_wrong_or_mismatched_policies(data_root, traine
         train_policy(*tiny(data_root, 40), AntHooks(), REPO_ROOT / "checkpoints" / "ant-expert", progress=False)
     with pytest.raises(ConfigError, match="did you mean 'policy.max_steps'"):
         load_policy_args(["policy.max_step=10"])
-    with pytest.raises(ConfigError, match="policy.geom_p=0.0 must be in"):
+    with pytest.raises(ConfigError, match="policy.geom_p=0.0 must be > 0 and <= 1"):
         load_policy_args(["policy.geom_p=0"])
     with pytest.raises(ConfigError, match="has no low-level policy"):
         load_policy_args(["env=pointmaze-medium"])

@@ -289,9 +289,10 @@ def test_train_and_load_a_cube_model(tiny_cube, tmp_path, param):
     assert manifest["token_dim"] == 30 and model.frame_dim == 3
     x = torch.randn(2, 3, 30)
     assert model(x, torch.zeros(2, 3, dtype=torch.long)).shape == (2, 3, 30)
-    from fmctd_dist.families.cube.quality import cube_plan_quality
+    from conftest import load_job
 
-    row = cube_plan_quality(tmp_path / "ckpt", cfg, n=4)  # the quality-table row runs end to end on a cube model
+    # the quality-table row runs end to end on a cube model
+    row = load_job("plan_quality").cube_plan_quality(tmp_path / "ckpt", cfg, n=4)
     assert row["warp"] == 2.0 and row["data"]["no_warp"] == 1.0 and 0.0 <= row["model"]["no_warp"] <= 1.0
     maze = load_config(["env=pointmaze-medium", "jump=5", *small[:5]], method="mctd")
     with pytest.raises(CheckpointError, match="env.name='cube-single'.*env.name='pointmaze-medium'"):
@@ -311,7 +312,10 @@ def test_v_offset_keeps_each_cube_coordinate_apart():
 
 def test_cube_plan_rules_on_hand_made_plans():
     """The quality table's rules: a warp, a cube left mid-air, a clean stack, two cubes moved at once."""
-    from fmctd_dist.families.cube.quality import plan_row, supported
+    from conftest import load_job
+
+    quality = load_job("plan_quality")
+    plan_row, supported = quality.plan_row, quality.supported
 
     start = np.array([[0.0, 0.0, 0.2, 2.0, 0.0, 0.2]])  # two cubes on the table
     lift = np.linspace(start[0], [0.0, 0.0, 1.5, 2.0, 0.0, 0.2], 9)[1:][None]  # cube 0 lifted, left mid-air

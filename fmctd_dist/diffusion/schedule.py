@@ -94,11 +94,6 @@ def simulation_rows(depth: int, n_rows: int, segment: int = 20, skip: int = 10) 
     return np.asarray(rows + [n_rows - 1], dtype=np.int64)
 
 
-def full_rows(n_rows: int) -> np.ndarray:
-    """Every row: the plain Diffusion Forcing sampler (no search)."""
-    return np.arange(n_rows, dtype=np.int64)
-
-
 class PyramidSchedule:
     """The pyramid matrix for P plan tokens plus the row sets a tree search needs."""
 

@@ -14,7 +14,7 @@ empty = the common config, i.e. the paper's recipe) trains runs/recipe/<tag>/<NA
 arm OTHER's checkpoint with WORDS added (sampling settings such as diffusion.guidance_path).
 
 Each arm is then evaluated in a subprocess (``--evaluate``, one thread): plan quality and x0
-precision (fmctd_dist.families.maze.plan_quality, as jobs/bench_denoiser.py) and Fast-MCTD on a
+precision (jobs/bench/plan_quality.py, as jobs/bench_denoiser.py) and Fast-MCTD on a
 small fixed grid (``jobs/eval.py runner=local eval.threads=1`` into results/recipe-<tag>-<NAME>).
 Its numbers go to <arm dir>/bench.json, so a rerun resumes: finished training returns at once
 and evaluated arms are read back. The table is printed and appended, with the command, to the
@@ -159,7 +159,7 @@ def evaluate(args: argparse.Namespace) -> None:
 
     from fmctd_dist.config import load_config
     from fmctd_dist.diffusion.checkpoint import read_manifest
-    from fmctd_dist.families.maze.plan_quality import plan_quality, precision
+    from plan_quality import plan_quality, precision
 
     torch.set_num_threads(1)
     out, ckpt = Path(args.evaluate), Path(args.checkpoint)

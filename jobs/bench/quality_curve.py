@@ -53,12 +53,12 @@ def _measured(ckpt: Path, manifest: dict[str, Any]) -> dict[str, Any]:
                            "cpu_h": manifest.get("cpu_time_s", manifest["wall_time_s"]) / 3600,
                            "wall_h": manifest["wall_time_s"] / 3600, "val_loss": manifest["final_losses"]["val"]}
     if family(env) == "cube":
-        from fmctd_dist.families.cube.quality import cube_plan_quality
+        from plan_quality import cube_plan_quality
 
         q = cube_plan_quality(ckpt)["model"]
         row.update(unguided_no_warp=q["no_warp"], boundary_step=q["boundary_step"], supported_end=q["supported_end"])
     else:
-        from fmctd_dist.families.maze.plan_quality import plan_quality, precision
+        from plan_quality import plan_quality, precision
 
         q = plan_quality(ckpt)
         p = precision(ckpt, timesteps=(19,))

@@ -4,7 +4,7 @@
 
 The value zeroes a plan with any step over the warp limit (0.75 + 0.25 H), and its first step is
 start -> first plan frame (docs/reference.md §4). For each checkpoint, on the noise of the quality table
-(20 plans per task start, unguided and guided; fmctd_dist.families.maze.plan_quality.sample_plans):
+(20 plans per task start, unguided and guided; jobs/bench/plan_quality.py, sample_plans):
 the share of warp-free plans, where the warps sit (first step, later token boundaries, inside
 tokens), the plans whose only warp is the first step, and per task the warp-free share. Then the
 first step from starts the tasks do not pick: 100 seeded validation-window starts (beside the
@@ -26,7 +26,9 @@ from fmctd_dist.tokens import PlanCodec
 from fmctd_dist.denoiser.local import LocalDenoiser
 from fmctd_dist.diffusion.checkpoint import load_checkpoint, normaliser_from_manifest
 from fmctd_dist.families.maze.geometry import maze_geometry
-from fmctd_dist.families.maze.plan_quality import SAMPLES_PER_TASK, sample_plans
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))  # jobs/bench/plan_quality.py
+from plan_quality import SAMPLES_PER_TASK, sample_plans, warp_limit  # noqa: E402
 
 VAL_STARTS = 100
 
@@ -61,7 +63,7 @@ def warp_sites(ckpt: Path, samples_per_task: int = SAMPLES_PER_TASK, val_starts:
     codec = PlanCodec(normaliser_from_manifest(manifest), cfg.model.frame_stack)
     denoiser = LocalDenoiser(model, cfg.diffusion, "cpu", micro_batch=50)
     geo = maze_geometry(cfg.env.name)
-    warp = 0.75 + 0.25 * cfg.jump
+    warp = warp_limit(cfg.jump)
     n = samples_per_task
     starts = np.repeat(np.stack([t.init_xy for t in geo.tasks]), n, 0).astype(np.float32)
     goals = np.repeat(np.stack([t.goal_xy for t in geo.tasks]), n, 0).astype(np.float32)

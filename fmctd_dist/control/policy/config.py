@@ -19,7 +19,6 @@ from typing import Any
 from fmctd_dist.config import (Config, build, check_ranges, from_dict, parse_overrides, planner_config, resolve_path,
                                spec)
 from fmctd_dist.control.policy.spec import require_policy
-from fmctd_dist.errors import ConfigError
 
 # Per-family defaults that differ from the ant's (the dataclass defaults). The cube's reach test follows a
 # whole pick-and-place (up to ~100 steps) to OGBench's 0.04 m success radius (0.4 obs units).
@@ -31,11 +30,12 @@ FAMILY_DEFAULTS: dict[str, dict[str, Any]] = {
 @dataclass
 class PolicyTrainConfig:
     out: str = ""  # policy dir (training writes it, evaluation reads it); "" -> runs/<env>-policy
-    hidden: list[int] = field(default_factory=lambda: [256, 256, 256])  # MLP widths, each Linear -> LayerNorm -> ReLU
+    hidden: list[int] = spec(factory=lambda: [256, 256, 256], gt=0, each=True, nonempty=True,
+                             why="MLP widths, each Linear -> LayerNorm -> ReLU, e.g. [256,256,256]")
     # Hindsight subgoal of row t = the ant's x, y at t + k, k = the sum of geom_draws Geometric(geom_p) draws
     # (each >= 1), cut at the episode's (or the upright run's) end. 2 x Geometric(0.2): mean 10 steps, mode 5-6,
     # 90% within 2..19 steps (see fmctd_dist.families.maze.ant_policy_rows.sample_offsets).
-    geom_p: float = 0.2
+    geom_p: float = spec(0.2, gt=0, le=1, why="mean offset = policy.geom_draws / geom_p")
     geom_draws: int = spec(2, gt=0)
     # the relative subgoal's norm is clipped here (input and training); 0 = no clip
     max_subgoal_dist: float = spec(4.0, ge=0)
@@ -94,20 +94,9 @@ def load_policy_args(args: list[str] | None = None) -> tuple[Config, PolicyConfi
     cfg = planner_config(groups, dotted, env="antmaze-medium", method="mctd")  # cube: no planner yet
     family = require_policy(cfg.env.name).family  # a point maze: one ConfigError (it has the PD controller)
     defaults = [(key, str(value)) for key, value in FAMILY_DEFAULTS.get(family, {}).items()]
-    return cfg, build(PolicyConfig, [*defaults, *pwords], validate_policy)
+    return cfg, build(PolicyConfig, [*defaults, *pwords], check_ranges)  # every check is a declared range
 
 
 def policy_config_from_dict(d: dict[str, Any]) -> PolicyConfig:
     """Rebuild from ``to_dict()`` output (manifests, train states)."""
     return from_dict(PolicyConfig, d)
-
-
-def validate_policy(cfg: PolicyConfig) -> None:
-    """Declared ranges, then the rest; raise one ConfigError naming the field and the fix."""
-    check_ranges(cfg)
-    if not 0 < cfg.policy.geom_p <= 1:
-        raise ConfigError(f"policy.geom_p={cfg.policy.geom_p} must be in (0, 1]; mean offset = policy.geom_draws / "
-                          "geom_p")
-    if not cfg.policy.hidden or any(h <= 0 for h in cfg.policy.hidden):
-        raise ConfigError(f"policy.hidden={cfg.policy.hidden} must be a non-empty list of positive widths, e.g. "
-                          "[256,256,256]")

@@ -34,7 +34,6 @@ import os
 import shutil
 import time
 import zipfile
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterator
 
@@ -42,11 +41,9 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from fmctd_dist.config import Config, resolve_path
-from fmctd_dist.artifacts import sha256_file
 from fmctd_dist.data.manifest_io import read_manifest_json, split_lines
 from fmctd_dist.data.npz import save_npz
-from fmctd_dist.data.splits import SPLITS, val_episodes
-from fmctd_dist.tokens import Normaliser
+from fmctd_dist.data.splits import SPLITS, SplitStates, load_split_states, verify_splits, write_splits
 from fmctd_dist.families.cube.env import ACT_DIM, cube_columns, make_cube_env, n_cubes, obs_dim, to_obs_units
 from fmctd_dist.errors import DatasetError
 from fmctd_dist.registry import env_names, family, require_family
@@ -204,21 +201,15 @@ def make_cube_dataset(cfg: Config, progress: bool = True) -> tuple[Path, dict[st
         parts.mkdir(parents=True)
         (parts / "params.json").write_text(json.dumps(params, sort_keys=True) + "\n")
     tmp = out.with_name(out.name + ".tmp")
-    shutil.rmtree(tmp, ignore_errors=True)
-    tmp.mkdir(parents=True)
     t0 = time.time()
-    splits = {"train": cfg.data.episodes, "val": val_episodes(cfg)}
-    sha, stats = {}, {}
+    stats: dict[str, dict] = {}
     cols = cube_columns(n_cubes(cfg.env.name))
-    mean = std = None
-    for split, n in splits.items():
+
+    def generate(split: str, n: int) -> dict[str, np.ndarray]:
         arrays, stats[split] = generate_split(cfg, split, n, parts, progress)
-        if split == "train":
-            flat = arrays["observations"][..., cols].reshape(-1, len(cols)).astype(np.float64)
-            mean, std = flat.mean(0).tolist(), flat.std(0).tolist()
-        save_npz(tmp / f"{split}.npz", arrays)
-        sha[split] = sha256_file(tmp / f"{split}.npz")
-        del arrays
+        return arrays
+
+    splits, sha, (mean, std) = write_splits(tmp, cfg, generate, cols)
     ogbench = OGBENCH_EPISODES[kind]
     manifest = {
         "generator_version": CUBE_GENERATOR_VERSION,
@@ -278,35 +269,14 @@ def load_cube_manifest(path: Path, cfg: Config | None = None, verify: bool = Tru
                 raise DatasetError(f"{mf}: {key}={manifest[key]!r} but the config asks for {want!r}; "
                                    f"regenerate or fix data.{key}")
     if verify:
-        for split in ("train", "val"):
-            f = path / f"{split}.npz"
-            if not f.is_file():
-                raise DatasetError(f"{f} is missing; delete {path} and regenerate")
-            if sha256_file(f) != manifest["sha256"].get(split):
-                raise DatasetError(f"{f} is corrupt (sha256 differs from manifest.json); delete {path} and regenerate")
+        verify_splits(path, manifest["sha256"], f"delete {path} and regenerate")
     return manifest
 
 
-@dataclass
-class CubeDataset:
-    """Cube xyz in obs units [E, S, 3N] per split (the planner state) plus the manifest (digest, normaliser).
+class CubeDataset(SplitStates):
+    """Cube xyz in obs units [E, S, 3N] per split (the planner state) plus the manifest (digest, normaliser)."""
 
-    Same surface as :class:`~fmctd_dist.families.maze.data.NavigateDataset`, so ``data/windows.py``
-    draws training windows from it unchanged.
-    """
-
-    path: Path
-    manifest: dict[str, Any]
-    train: np.ndarray  # [E, S, 3N] float32
-    val: np.ndarray  # [E_val, S, 3N] float32
-
-    @property
-    def digest(self) -> str:
-        return self.manifest["sha256"]["train"]
-
-    @property
-    def normaliser(self) -> Normaliser:
-        return Normaliser.from_lists(self.manifest["state_mean"], self.manifest["state_std"])
+    MOMENTS = ("state_mean", "state_std")
 
 
 def load_cube_dataset(cfg: Config, path: Path | None = None) -> CubeDataset:
@@ -314,20 +284,7 @@ def load_cube_dataset(cfg: Config, path: Path | None = None) -> CubeDataset:
     path = path or dataset_dir(cfg)
     cube_type(cfg.env.name)
     manifest = load_cube_manifest(path, cfg, verify=True)
-    cols = cube_columns(n_cubes(cfg.env.name))
-    splits = {}
-    for split in ("train", "val"):
-        f = path / f"{split}.npz"
-        want = (manifest["episodes"][split], manifest["episode_steps"], manifest["obs_dim"])
-        try:
-            with np.load(f, allow_pickle=False) as z:
-                obs = z["observations"]
-        except (KeyError, ValueError, OSError, EOFError) as e:
-            raise DatasetError(f"{f} is malformed ({type(e).__name__}); delete {path} and regenerate") from None
-        if obs.shape != want or obs.dtype != np.float32:
-            raise DatasetError(f"{f}: observations are {obs.dtype} {list(obs.shape)} but {path / 'manifest.json'} "
-                               f"says float32 {list(want)}; delete {path} and regenerate")
-        splits[split] = np.ascontiguousarray(obs[..., cols], dtype=np.float32)
+    splits = load_split_states(path, manifest, cube_columns(n_cubes(cfg.env.name)), f"delete {path} and regenerate")
     return CubeDataset(path, manifest, splits["train"], splits["val"])
 
 

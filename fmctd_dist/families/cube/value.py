@@ -26,8 +26,8 @@ The rules, in the order they apply:
   (H - t) / H if that completes the task, else 0.1 per cube placed then; :meth:`output` returns
   the plan truncated there.
 
-The tolerances match ``families/cube/quality.py`` (the denoiser-quality table), duplicated
-here because ``search/`` stays free of the evaluation layer.
+The denoiser-quality table (jobs/bench/plan_quality.py) reads its tolerances from here, so it
+measures what the value will demand.
 """
 
 from __future__ import annotations

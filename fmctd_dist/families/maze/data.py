@@ -17,22 +17,17 @@ from __future__ import annotations
 import json
 import os
 import shlex
-import shutil
 import time
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
 
-from fmctd_dist.artifacts import sha256_file
 from fmctd_dist.config import Config, is_ant, resolve_path
 from fmctd_dist.families.maze.ant_data import ANT_GENERATOR_VERSION, AntSource, check_expert_matches
 from fmctd_dist.data.manifest_io import read_manifest_json, split_lines
-from fmctd_dist.data.npz import load_npz, save_npz
 from fmctd_dist.families.maze.point_data import POINT_GENERATOR_VERSION, PointSource
-from fmctd_dist.data.splits import SPLITS, val_episodes
-from fmctd_dist.tokens import Normaliser
+from fmctd_dist.data.splits import SPLITS, SplitStates, load_split_states, val_episodes, verify_splits, write_splits
 from fmctd_dist.errors import DatasetError
 from fmctd_dist.families.maze.record import MAZE_KINDS
 from fmctd_dist.registry import require_family
@@ -83,20 +78,9 @@ def make_dataset(cfg: Config, progress: bool = True) -> tuple[Path, dict[str, An
         raise DatasetError(f"{out} exists but has no manifest.json (an interrupted run?); {regenerate_fix(out, cfg)}")
     source = data_source(cfg)  # the ant expert is loaded and checked before anything is written
     tmp = out.with_name(out.name + ".tmp")
-    shutil.rmtree(tmp, ignore_errors=True)
-    tmp.mkdir(parents=True)
     t0 = time.time()
-    splits = {"train": cfg.data.episodes, "val": val_episodes(cfg)}
-    sha, counts = {}, {}
-    normaliser = None
-    for split, n in splits.items():
-        arrays = source.generate(split, n, progress)
-        if split == "train":
-            flat = arrays["observations"][..., :2].reshape(-1, 2).astype(np.float64)  # the planner's x, y
-            normaliser = (flat.mean(0).tolist(), flat.std(0).tolist())
-        save_npz(tmp / f"{split}.npz", arrays)
-        sha[split] = sha256_file(tmp / f"{split}.npz")
-        counts[split] = n
+    counts, sha, normaliser = write_splits(tmp, cfg, lambda split, n: source.generate(split, n, progress),
+                                           slice(None, 2))  # the planner's x, y
     manifest = {
         "generator_version": source.version,
         "env": cfg.env.name,
@@ -195,31 +179,12 @@ def load_manifest(path: Path, cfg: Config | None = None, verify: bool = True) ->
         if is_ant(cfg.env.name):
             check_expert_matches(manifest, cfg, path)
     if verify:
-        for split, digest in manifest["sha256"].items():
-            f = path / f"{split}.npz"
-            if not f.is_file():
-                raise DatasetError(f"{f} is missing; {regenerate_fix(path, cfg)}")
-            if sha256_file(f) != digest:
-                raise DatasetError(f"{f} is corrupt (sha256 differs from manifest.json); {regenerate_fix(path, cfg)}")
+        verify_splits(path, manifest["sha256"], regenerate_fix(path, cfg))
     return manifest
 
 
-@dataclass
-class NavigateDataset:
+class NavigateDataset(SplitStates):
     """x, y observations [E, S, 2] per split (what the planner models) plus the manifest (digest, normaliser)."""
-
-    path: Path
-    manifest: dict[str, Any]
-    train: np.ndarray  # [E, S, 2] float32
-    val: np.ndarray  # [E_val, S, 2] float32
-
-    @property
-    def digest(self) -> str:
-        return self.manifest["sha256"]["train"]
-
-    @property
-    def normaliser(self) -> Normaliser:
-        return Normaliser.from_lists(self.manifest["obs_mean"], self.manifest["obs_std"])
 
     def position_readout(self, cfg: Config) -> tuple[Any, dict[str, Any]]:
         """A frame is its normalised (x, y): the readout is the frame itself (train.boundary_space=position
@@ -236,12 +201,7 @@ def load_dataset(cfg: Config, path: Path | None = None) -> NavigateDataset:
     require_family(cfg.env.name, MAZE_KINDS, "the navigate-data code (families/maze/data.py, used by jobs/train.py)")
     path = path or dataset_dir(cfg)
     manifest = load_manifest(path, cfg, verify=True)
-    splits = {}
-    for split in ("train", "val"):
-        want = (manifest["episodes"][split], manifest["episode_steps"], manifest.get("obs_dim", 2))
-        obs = load_npz(path / f"{split}.npz", {"observations": (np.float32, want)},
-                       f"it does not match {path / 'manifest.json'}; {regenerate_fix(path, cfg)}")["observations"]
-        splits[split] = np.ascontiguousarray(obs[..., :2], dtype=np.float32)  # ant: x, y of the 29-D state
+    splits = load_split_states(path, manifest, slice(None, 2), regenerate_fix(path, cfg))  # ant: x, y of its state
     return NavigateDataset(path, manifest, splits["train"], splits["val"])
 
 

@@ -86,16 +86,12 @@ class ReachConfig:
     threads: int = spec(1, ge=0, why=THREADS)
 
 
-def _invdyn() -> HeadTrainConfig:
-    return HeadTrainConfig(hidden=[1024, 1024])  # the authors' 2 x 1024
-
-
 @dataclass
 class PartsConfig:
     vae: VAETrainConfig = field(default_factory=VAETrainConfig)
     latents: LatentsConfig = field(default_factory=LatentsConfig)
     estimator: HeadTrainConfig = field(default_factory=HeadTrainConfig)
-    invdyn: HeadTrainConfig = field(default_factory=_invdyn)
+    invdyn: HeadTrainConfig = field(default_factory=lambda: HeadTrainConfig(hidden=[1024, 1024]))  # authors' 2 x 1024
     reach: ReachConfig = field(default_factory=ReachConfig)
 
     def to_dict(self) -> dict[str, Any]:

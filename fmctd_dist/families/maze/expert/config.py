@@ -34,10 +34,11 @@ class AntEnvConfig:
 
 @dataclass
 class SACConfig:
-    hidden: list[int] = field(default_factory=lambda: [256, 256])  # actor and critic MLP widths (OGBench: 256x256)
+    hidden: list[int] = spec(factory=lambda: [256, 256], gt=0, each=True, nonempty=True,
+                             why="actor and critic MLP widths, e.g. [256,256] (OGBench)")
     lr: float = spec(3e-4, gt=0)  # Adam lr of actor, critics, temperature (OGBench 1e-4; 3e-4 learns faster per step)
-    gamma: float = 0.99
-    tau: float = 0.005  # polyak rate of the target critics
+    gamma: float = spec(0.99, ge=0, lt=1, why="0.99 is usual")
+    tau: float = spec(0.005, gt=0, le=1, why="polyak rate of the target critics; 0.005 is usual")
     batch_size: int = spec(256, gt=0)
     init_alpha: float = spec(1.0, gt=0)  # initial entropy temperature
     target_entropy_scale: float = spec(0.5, ge=0)  # target entropy = -scale * act_dim (OGBench 0.5; SAC paper 1.0)
@@ -95,12 +96,6 @@ def expert_config_from_dict(d: dict[str, Any]) -> AntExpertConfig:
 def validate_expert(cfg: AntExpertConfig) -> None:
     """Declared ranges, then the checks between fields; raise one ConfigError naming the field and the fix."""
     check_ranges(cfg)
-    if not cfg.sac.hidden or any(h <= 0 for h in cfg.sac.hidden):
-        raise ConfigError(f"sac.hidden={cfg.sac.hidden} must be a non-empty list of positive widths, e.g. [256,256]")
-    if not 0 < cfg.sac.tau <= 1:
-        raise ConfigError(f"sac.tau={cfg.sac.tau} must be in (0, 1]; 0.005 is usual")
-    if not 0 <= cfg.sac.gamma < 1:
-        raise ConfigError(f"sac.gamma={cfg.sac.gamma} must be in [0, 1); 0.99 is usual")
     if cfg.sac.batch_size > cfg.sac.buffer_size:
         raise ConfigError(f"sac.batch_size={cfg.sac.batch_size} exceeds sac.buffer_size={cfg.sac.buffer_size}")
     if cfg.expert.start_steps < cfg.sac.batch_size:
