@@ -27,8 +27,9 @@ def uniform_levels(plan_tokens: int, levels: int, resample: int = 1) -> np.ndarr
 
     Diffuser's sampler: the whole plan denoised together, one U-Net call per level, the start inpainted as the clean
     token 0. ``method.resample`` = U > 1 adds RePaint's resampling (Lugmayr et al. 2022), which pulls the generated
-    frames back into agreement with the inpainted start; U = 1 is Janner's and the paper's plain DDIM. Resample U: after each step
-    down to a level l > 0, U - 1 times (up to l + 1, down to l): R = L + 2 (U - 1)(L - 1) rows.
+    frames back into agreement with the inpainted start; U = 1 is Janner's and the paper's plain DDIM.
+    Resample U: after each step down to a level l > 0, U - 1 times (up to l + 1, down to l): R = L + 2 (U - 1)(L - 1)
+    rows.
     """
     ladder = [levels]
     for lv in range(levels - 1, -1, -1):
