@@ -170,3 +170,19 @@ def test_results_are_never_swapped_between_trees():
             assert r.stats["wait_s"] >= 0 and r.stats["group_jobs"] >= b.size
             assert r.denoise_time_s == pytest.approx(b.size / max(r.stats["group_jobs"], 1))  # its share
     assert pool.rounds < 240
+
+
+def test_calls_of_different_rows_share_one_group(local):
+    """An expansion (a few rows) and a simulation (more rows, re-noising, a mask) of two trees run in the same
+    micro-batches, each with its own bits (a third tree's call takes the first round, which the gate holds until
+    the other two wait)."""
+    rng = np.random.default_rng(7)
+    trees = [[make_batch(rng, jobs=1, rows=3)], [make_batch(rng, jobs=1, rows=3)],
+             [make_batch(rng, jobs=1, rows=6, seeded=True, masked=True)]]
+    out = run_trees(gated_pool(local, 2), trees)
+    groups = []
+    for (b,), (r,) in zip(trees, out):
+        alone = local.denoise(b, micro_batch=M)
+        assert np.array_equal(r.x, alone.x) and np.array_equal(r.x0, alone.x0)
+        groups.append(r.stats["group_jobs"])
+    assert sorted(groups) == [1, 2, 2]

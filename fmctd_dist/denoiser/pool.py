@@ -3,7 +3,7 @@
 A tree alone sends small calls (MCTD and S-MCTD: one job each), which leave a batched model idle.
 The pool batches continuously: a call runs at once when the pool is idle; calls that arrive while
 a round runs wait, and the next round takes all of them. A round groups its calls by shape
-(tokens, token dim, transitions, which optional fields are there), runs each group through the
+(tokens, token and state dims), runs each group through the
 inner denoiser in the usual fixed micro-batches of ``micro_batch`` jobs, and hands each call its
 own rows. Since a job's bits do not depend on which jobs share its micro-batch (docs/design.md §7),
 every tree gets the bits it would get alone at the same ``micro_batch`` (docs/design.md §6).
@@ -18,6 +18,8 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 
+import numpy as np
+
 from fmctd_dist.denoiser.protocol import DenoiseBatch, DenoiseResult, concat_batches
 
 
@@ -30,8 +32,22 @@ class _Call:
 
 
 def signature(b: DenoiseBatch) -> tuple:
-    """Calls with equal signatures stack exactly (``concat_batches`` pads and fills nothing)."""
-    return (b.x.shape[1:], b.levels.shape[1], b.start.shape[1:], b.noise_seed is None, b.guide_mask is None)
+    """Calls with equal signatures share micro-batches: the same tokens and state dims. Their levels may hold
+    different numbers of rows (an expansion's segment beside a simulation's jumpy rows): ``concat_batches``
+    pads a job's levels with its last row, which leaves its tokens and x0 bit for bit as they were
+    (``diffusion.sampler.run_levels``), and fills a missing mask or noise seed with what the sampler treats
+    like none, so every job keeps the bits it has alone at the same micro-batch."""
+    return (b.x.shape[1:], b.start.shape[1:])
+
+
+def cost_order(b: DenoiseBatch) -> np.ndarray:
+    """Jobs sorted by what their micro-batch will cost: the last row that moves a token, then guided or not. A
+    micro-batch runs every row any of its jobs needs, guided if any job is, so an expansion (2 rows) cut in with a
+    simulation (20 rows) would pay for 20; sorted, it shares its micro-batch with other short jobs. Which jobs
+    share a micro-batch never changes a job's bits (docs/design.md §7)."""
+    moves = (np.diff(b.levels, axis=1) != 0).any(axis=2)  # [B, R]
+    last = (moves.shape[1] - np.argmax(moves[:, ::-1], axis=1)) * moves.any(axis=1) if moves.size else np.zeros(b.size)
+    return np.lexsort((b.scale != 0, last))
 
 
 class PooledDenoiser:
@@ -99,7 +115,10 @@ class PooledDenoiser:
         try:
             for group in groups.values():
                 batch = concat_batches([c.batch for c in group]) if len(group) > 1 else group[0].batch
-                res = self.inner.denoise(batch, micro_batch=self.micro_batch)
+                order = cost_order(batch)  # like jobs share micro-batches: few rows with few, guided with guided
+                res = self.inner.denoise(batch.take(order), micro_batch=self.micro_batch)
+                back = np.argsort(order)
+                res = DenoiseResult(res.x[back], res.x0[back], res.denoise_time_s, res.retries, res.stats)
                 lo = 0
                 for c in group:
                     hi = lo + c.batch.size
