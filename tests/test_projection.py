@@ -1,4 +1,4 @@
-"""The GPU projection of a plan trace (denoiser.projection): log-log interpolation of a throughput table, a call's
+"""The GPU projection of a plan trace (jobs/bench/projection.py): log-log interpolation of a throughput table, a call's
 seconds at its own batch or its recorded micro-batch, plus the search's own CPU seconds; numbers done by hand."""
 
 from __future__ import annotations
@@ -7,7 +7,11 @@ import math
 
 import pytest
 
-from fmctd_dist.denoiser.projection import H200_FP32, call_seconds, project, throughput
+from conftest import load_job
+
+projection = load_job("projection")
+H200_FP32, call_seconds, project, throughput = (projection.H200_FP32, projection.call_seconds, projection.project,
+                                                projection.throughput)
 
 TABLE = {10: {1: 100.0, 100: 10_000.0}, 100: {1: 50.0, 100: 1_000.0}}
 

@@ -23,7 +23,7 @@ def call_record(batch: DenoiseBatch, micro_batch: int) -> dict:
     """The shape of one call cut into micro-batches of ``micro_batch`` jobs, and per micro-batch what its model
     work is: rows where a job goes down (one model call each, as ``run_levels`` runs them), rows that re-noise,
     whether a job is guided (a guided micro-batch also runs the gradient). ``call_down_rows``: the model calls of
-    the whole call run as one batch (a GPU's micro-batch; the projection in ``denoiser.projection`` reads it)."""
+    the whole call run as one batch (a GPU's micro-batch; the projection in ``jobs/bench/projection.py`` reads it)."""
     b, t, d = batch.x.shape
     guided = batch.scale != 0
     cut = micro_batch_indices(b, micro_batch)

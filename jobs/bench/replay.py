@@ -24,7 +24,7 @@ printed and written (with a JSON of its rows) to ``replay-<device>[-call].md`` i
 the search's own overhead (plan - denoise), the replayed denoiser time, the replayed plan time (replayed
 denoiser + measured overhead) and replayed / measured, which on the recording CPU should be ~1 (within 10%).
 ``mode=project`` needs no model: for every ``<out>/<env>`` folder (or ``envs=[...]``) it prices each stored
-call with the H200 throughput table (``denoiser.projection``, a projection, not a measurement) and writes
+call with the H200 throughput table (``jobs/bench/projection.py``, a projection, not a measurement) and writes
 ``<report>/projection.md`` (default ``report=<out>``): per maze MCTD / Fast-MCTD, CPU, projected and the paper's.
 Words not named here are config overrides (``method.budget=100``, ``eval.threads=1``), applied to every method.
 """
@@ -42,7 +42,7 @@ import torch
 from fmctd_dist.cli import run
 from fmctd_dist.config import load_config
 from fmctd_dist.denoiser.local import LocalDenoiser
-from fmctd_dist.denoiser.projection import BATCHES, H200_SOURCE, project, search_cpu_s
+from projection import BATCHES, H200_SOURCE, project, search_cpu_s
 from fmctd_dist.denoiser.trace import TracingDenoiser, as_one_batch, load_trace, replay_batch
 from fmctd_dist.device import set_threads
 from fmctd_dist.diffusion.checkpoint import (
@@ -190,7 +190,7 @@ def paper_seconds(env: str, method: str) -> float | None:
 
 def projection_tables(traces: dict[str, dict[str, dict]]) -> str:
     """The projection (env -> method -> trace) as two markdown tables: per maze MCTD / Fast-MCTD (CPU, projected,
-    paper), then per method the model work and both GPU micro-batch settings (``denoiser.projection``)."""
+    paper), then per method the model work and both GPU micro-batch settings (``jobs/bench/projection.py``)."""
     def ratio(a, b):
         return f"{a / b:.1f}x" if a is not None and b else "–"
 

@@ -69,8 +69,8 @@ def step(i: int, methods: str, batch: str, mazes: tuple[str, ...], words: list[s
 
 def side_by_side(out: Path, mazes: tuple[str, ...], device: str, machine: str) -> str:
     """OUT/replay.md: the projection beside what the replays on ``device`` measured (the replay JSONs found)."""
-    sys.path.insert(0, str(REPO))
-    from fmctd_dist.denoiser.projection import H200_SOURCE, call_seconds
+    sys.path[:0] = [str(REPO), str(REPO / "jobs" / "bench")]
+    from projection import H200_SOURCE, call_seconds
     from fmctd_dist.denoiser.trace import load_trace
     from fmctd_dist.families.maze.paper import POINTMAZE
 

@@ -1,5 +1,8 @@
 """A plan's time on a GPU we do not have, projected from its call trace and a measured throughput table (issue 55).
 
+    python jobs/bench/projection.py jobs/bench/traces/pointmaze-giant/*.json*   # one line per trace
+    (jobs/bench/replay.py mode=project writes the tables of docs/results.md from the same functions)
+
 Why: the paper's 16-110x MCTD / Fast-MCTD ratios come from a GPU, where a batch of 200 jobs costs about what one
 does; our CPUs cannot show that half of the speed-up. A trace (``denoiser.trace``) says what model work each call
 of a real plan made, a throughput table measured on a GPU says what that work costs, and the search's own CPU
@@ -76,3 +79,27 @@ def project(trace: dict, batch: str = "call", table: dict[int, dict[int, float]]
     overhead_s = search_cpu_s(trace)
     return {"method": trace["method"], "env": trace["env"], "batch": batch, "model_s": model_s,
             "overhead_s": overhead_s, "plan_s": model_s + overhead_s}
+
+
+def main(argv: list[str]) -> int:
+    import sys
+    from pathlib import Path
+
+    if not argv or argv[0] in ("-h", "--help"):
+        print(__doc__)
+        return 0
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+    from fmctd_dist.denoiser.trace import load_trace
+
+    for path in map(Path, argv):  # <folder>/<method>.json or .json.gz
+        stored = load_trace(path.parent, path.name.split(".json")[0])
+        one, trace = project(stored, "call"), project(stored, "trace")
+        print(f"{path}: {one['method']} on {one['env']}: projected plan {one['plan_s']:.2f} s (calls as one batch), "
+              f"{trace['plan_s']:.2f} s (at the recorded micro-batch); search {one['overhead_s']:.2f} CPU s")
+    return 0
+
+
+if __name__ == "__main__":
+    import sys
+
+    raise SystemExit(main(sys.argv[1:]))
