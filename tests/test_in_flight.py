@@ -61,3 +61,27 @@ def test_a_run_never_mixes_micro_batches(tiny_checkpoint, tmp_path):
                                "ray.micro_batch=4", "eval.threads=1"])
     with pytest.raises(ResultsError, match="ray.micro_batch: 1 there, 4 now"):
         run_local(prepare(cfg, hooks_for), ResultStore(tmp_path, "r"), progress=False, log=lambda s: None)
+
+
+VISUAL = "checkpoints/visual-pointmaze-medium-h1"
+
+
+@pytest.mark.skipif(not __import__("os").path.exists(f"{VISUAL}/model.pt"), reason=f"{VISUAL} is not shipped")
+def test_pooled_visual_rows_equal_lone_rows(tmp_path, monkeypatch):
+    """The visual family pools too: its planner's guide map (latents -> estimated positions) rides in every job, and
+    its rows keep their bits. One plan per episode (the time limit ends each after it): images, VAE and estimator
+    run, the cost of env steps is saved."""
+    from fmctd_dist.denoiser.pool import PooledDenoiser
+
+    rounds: list[int] = []
+    run_round = PooledDenoiser._round
+    monkeypatch.setattr(PooledDenoiser, "_round", lambda self, calls: (rounds.append(len(calls)),
+                                                                       run_round(self, calls))[1])
+    words = ["env=visual-pointmaze-medium", "method=mctd", "method.budget=6", "ray.micro_batch=4",
+             "method.early_stop=false", "env.warp_sparse=8.0", "eval.episode_time_limit=1"]
+    alone, pooled = rows(words, tmp_path, 1), rows(words, tmp_path, 3)
+    assert sorted(alone) == sorted(pooled) == [(t, s) for t in (1, 2) for s in (0, 1)]
+    for key, r in alone.items():
+        assert all(r[f] == pooled[key][f] for f in PLAN_FIELDS if f in r), key
+        assert len(r["plan_xy"]) > 0
+    assert max(rounds) > 1
