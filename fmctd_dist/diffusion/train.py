@@ -18,15 +18,12 @@ from __future__ import annotations
 
 import copy
 import math
-import time
 from pathlib import Path
 from typing import Any, Callable, Protocol
 
 import numpy as np
 import torch
-from tqdm import tqdm
 
-from fmctd_dist.artifacts import module_state
 from fmctd_dist.config import Config, git_sha, resolve_path
 from fmctd_dist.tokens import Normaliser
 from fmctd_dist.device import resolve_device, set_threads, warn_bf16
@@ -36,7 +33,8 @@ from fmctd_dist.diffusion.model import DFTransformer
 from fmctd_dist.diffusion.models import build_model
 from fmctd_dist.diffusion.schedule import alphas_cumprod, make_betas
 from fmctd_dist.errors import ConfigError, DatasetError
-from fmctd_dist.resume import SNAPSHOTS, Clock, check_resume, load_train_state, save_train_state, snapshot_due
+from fmctd_dist.resume import SNAPSHOTS, TrainRun, check_resume, load_part_states, load_train_state, part_states, \
+    save_train_state, snapshot_due
 
 CONTEXT_T_MAX = 250  # with prob. 0.5 the context token's timestep is resampled in [0, 250)
 MASKED_WEIGHT = 0.05  # loss weight of tokens past the random terminal (they are pure noise)
@@ -303,7 +301,7 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
     loss_fn = make_loss(cfg, device, readout)
     rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence([tc.seed, data.seed])))
     gen = torch.Generator(device=device).manual_seed(tc.seed)
-    step, wall, cpu, history, resumed_from = 0, 0.0, 0.0, {"val": [], "train": []}, None
+    saved: dict[str, Any] = {"history": {"val": [], "train": []}}  # step, clock and history to continue from
     init_from = None  # provenance of train.init_from weights, kept by every later save and resume
     ema = copy.deepcopy(model).requires_grad_(False)  # what gets shipped (ema_decay=0: a plain copy)
 
@@ -313,15 +311,9 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
         check_compatible({"config": state["config"], "n_tokens": state["n_tokens"]}, cfg, out_dir)
         check_resume(out_dir, "planner", "train.out", {}, {}, data=[("dataset", state["dataset_digest"], data.digest)],
                      data_fix=same_data)
-        model.load_state_dict(state["model"])
+        load_part_states(state, model=model, optimizer=opt, numpy_rng=rng, torch_rng=gen)
         ema.load_state_dict(state.get("ema", state["model"]))  # runs from before EMA start it here
-        opt.load_state_dict(state["optimizer"])
-        rng.bit_generator.state = state["numpy_rng"]
-        gen.set_state(state["torch_rng"])
-        step, wall, history = int(state["step"]), float(state["wall_time_s"]), state["history"]
-        cpu = float(state.get("cpu_time_s", wall))
-        init_from = state.get("init_from")
-        resumed_from = step
+        saved, init_from = state, state.get("init_from")
     elif (out_dir / "manifest.json").exists():
         # A shipped checkpoint (model.pt + manifest, no train_state.pt: that is not committed).
         # Continue from its weights and step with a fresh optimiser rather than overwrite it.
@@ -330,19 +322,20 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
                      data=[("dataset", manifest["dataset_digest"], data.digest)], data_fix=same_data)
         model.load_state_dict(shipped.state_dict())
         ema.load_state_dict(shipped.state_dict())
-        step, wall = int(manifest["train_steps"]), float(manifest["wall_time_s"])
-        cpu = float(manifest.get("cpu_time_s", wall))
+        step = int(manifest["train_steps"])
+        saved = {"step": step, "wall_time_s": manifest["wall_time_s"], "cpu_time_s": manifest.get("cpu_time_s"),
+                 "history": {"val": [list(v) for v in manifest.get("val_history", [])], "train": [],
+                             "optimizer_reset_at": [step]}}
         init_from = manifest.get("init_from")
-        history = {"val": [list(v) for v in manifest.get("val_history", [])], "train": [],
-                   "optimizer_reset_at": [step]}
-        resumed_from = step
     elif tc.init_from:
         weights, init_from = load_init_weights(resolve_path(tc.init_from), cfg)
         model.load_state_dict(weights)
         ema.load_state_dict(weights)
-    done = step >= tc.max_steps or Clock(wall, cpu, tc.budget_clock).over(tc.time_budget_s)
-    if resumed_from is not None and done:  # finished, by steps or by its time budget
-        return _summary(step, wall, history, out_dir, model, resumed_from)
+    run = TrainRun("train", tc.max_steps, saved, tc.time_budget_s, tc.budget_clock, progress)
+    resumed_from = None if "step" not in saved else run.step
+    if resumed_from is not None and run.last:  # finished, by steps or by its time budget
+        run.close()
+        return _summary(run.step, run.clock.wall_s, run.history, out_dir, model, resumed_from)
 
     val = [torch.as_tensor(v, dtype=torch.float32, device=device) for v in data.val_batches(tc.val_batches,
                                                                                         tc.batch_size)]
@@ -354,28 +347,23 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
         base["init_from"] = init_from
 
     def save() -> None:
-        wall, cpu = clock.wall_s, clock.cpu_s
-        summary = _summary(step, wall, history, out_dir, model, resumed_from)
+        step, wall, cpu = run.step, run.clock.wall_s, run.clock.cpu_s
+        summary = _summary(step, wall, run.history, out_dir, model, resumed_from)
         fields = {**base, "ema_decay": tc.ema_decay, "config": cfg.to_dict(), "train_steps": step, "wall_time_s": wall,
                   "cpu_time_s": cpu, "vs_paper": vs_paper(cfg, step), "final_losses": summary["final_losses"],
-                  "val_history": history["val"]}
+                  "val_history": run.history["val"]}
         fields.update(lineage(fields))  # steps, CPU time and samples, through every init_from ancestor
         save_checkpoint(out_dir, ema, fields)
-        snap = snapshot_due(out_dir, tc.snapshot_every_s, cpu if clock.kind == "cpu" else wall)
+        snap = snapshot_due(out_dir, tc.snapshot_every_s, cpu if run.clock.kind == "cpu" else wall)
         if snap is not None:
             save_checkpoint(out_dir / SNAPSHOTS / f"{snap}-step{step:07d}", ema, fields)
         save_train_state(out_dir, {
-            "model": module_state(model), "ema": module_state(ema), "optimizer": opt.state_dict(),
-            "step": step, "wall_time_s": wall, "cpu_time_s": cpu,
-            "numpy_rng": rng.bit_generator.state, "torch_rng": gen.get_state(), "history": history,
+            **part_states(model=model, ema=ema, optimizer=opt, numpy_rng=rng, torch_rng=gen), **run.state(),
             "config": cfg.to_dict(), "dataset_digest": data.digest, "n_tokens": cfg.n_tokens, "init_from": init_from,
         })
 
     model.train()
-    bar = tqdm(total=tc.max_steps, initial=step, disable=not progress, desc="train", dynamic_ncols=True)
-    running, n_running, t_log = torch.zeros((), device=device), 0, time.perf_counter()
-    clock = Clock(wall, cpu, tc.budget_clock)
-    while step < tc.max_steps:
+    while not run.last:
         x0 = torch.as_tensor(data.sample(rng, tc.batch_size), dtype=torch.float32, device=device)
         if x0.shape[1:] != (cfg.n_tokens, cfg.token_dim):
             raise DatasetError(
@@ -383,7 +371,7 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
                 f"({cfg.n_tokens}, {cfg.token_dim}); data.train_window, env.horizon, jump and model.frame_stack "
                 "must describe the same windows"
             )
-        lr = lr_at(cfg, step, clock.used())
+        lr = lr_at(cfg, run.step, run.clock.used())
         for group in opt.param_groups:
             group["lr"] = lr
         with torch.autocast(device.type, dtype=torch.bfloat16, enabled=tc.precision == "bf16"):
@@ -391,29 +379,18 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
         opt.zero_grad(set_to_none=True)
         loss.backward()
         opt.step()
-        update_ema(ema, model, tc.ema_decay, step)
-        step += 1
-        running += loss.detach()
-        n_running += 1
-        last = step == tc.max_steps or clock.over(tc.time_budget_s)
-        if step % LOG_EVERY == 0 or last:
-            mean = float(running) / n_running
+        update_ema(ema, model, tc.ema_decay, run.step)
+        run.tick(loss.detach().float())  # summed on the device: one sync per log
+        if run.due(LOG_EVERY):
+            mean = run.log()[0]
             if not np.isfinite(mean):
-                raise FloatingPointError(f"training loss is {mean} at step {step}; lower train.lr or check the data")
-            now = time.perf_counter()
-            history["train"].append([step, mean])
-            bar.set_postfix(loss=f"{mean:.4f}", steps_s=f"{n_running / (now - t_log):.1f}")
-            bar.update(n_running)
-            running, n_running, t_log = torch.zeros((), device=device), 0, now
-        if tc.val_every > 0 and (step % tc.val_every == 0 or last):
-            history["val"].append([step, validation_loss(ema, loss_fn, val, device)])
-        if step % tc.ckpt_every == 0 or last:
-            clock.lap()
-            save()
-        if last:
-            break
-    bar.close()
-    return _summary(step, clock.wall_s, history, out_dir, model, resumed_from)
+                raise FloatingPointError(f"training loss is {mean} at step {run.step}; lower train.lr or check the "
+                                         "data")
+        if tc.val_every > 0 and run.due(tc.val_every):
+            run.history["val"].append([run.step, validation_loss(ema, loss_fn, val, device)])
+        run.checkpoint(tc.ckpt_every, save)
+    run.close()
+    return _summary(run.step, run.clock.wall_s, run.history, out_dir, model, resumed_from)
 
 
 @torch.no_grad()
