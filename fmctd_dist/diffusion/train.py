@@ -63,27 +63,39 @@ class TrainDataLike(Protocol):
     def val_batches(self, n: int, batch: int) -> list[np.ndarray]: ...
 
 
-class DFLoss(torch.nn.Module):
+class NoisingLoss(torch.nn.Module):
+    """What both losses share: the schedule's forward process, x_k = sqrt(ab_k) x0 + sqrt(1 - ab_k) noise with the
+    noise clipped to +-diffusion.clip_noise, and the sampler's timestep for a clean (level-0) token."""
+
+    def __init__(self, cfg: Config, device: torch.device):
+        super().__init__()
+        dc = cfg.diffusion
+        self.ab = ab = alphas_cumprod(make_betas(dc.beta_schedule, dc.timesteps, dc.beta_start, dc.beta_end))
+        self.register_buffer("sqrt_ab", torch.as_tensor(np.sqrt(ab), dtype=torch.float32, device=device))
+        self.register_buffer("sqrt_1m_ab", torch.as_tensor(np.sqrt(1.0 - ab), dtype=torch.float32, device=device))
+        self.timesteps, self.clip_noise = dc.timesteps, dc.clip_noise
+        self.context_t = dc.stabilization - 1  # docs/reference.md §5
+
+    def noised(self, x0: torch.Tensor, k: torch.Tensor, gen: torch.Generator) -> torch.Tensor:
+        """x0 [B, T, D] at per-token timesteps k [B, T]; the noise drawn from ``gen``."""
+        noise = torch.randn(x0.shape, generator=gen, device=x0.device).clamp(-self.clip_noise, self.clip_noise)
+        return self.sqrt_ab[k][..., None] * x0 + self.sqrt_1m_ab[k][..., None] * noise
+
+
+class DFLoss(NoisingLoss):
     """Diffusion Forcing loss: per-token timesteps, length randomisation, min-SNR-weighted x0 MSE."""
 
     def __init__(self, cfg: Config, device: torch.device, readout: Readout | None = None):
-        super().__init__()
-        dc = cfg.diffusion
-        ab = alphas_cumprod(make_betas(dc.beta_schedule, dc.timesteps, dc.beta_start, dc.beta_end))
-        snr = ab / (1.0 - ab)
-        self.register_buffer("sqrt_ab", torch.as_tensor(np.sqrt(ab), dtype=torch.float32, device=device))
-        self.register_buffer("sqrt_1m_ab", torch.as_tensor(np.sqrt(1.0 - ab), dtype=torch.float32, device=device))
+        super().__init__(cfg, device)
+        snr = self.ab / (1.0 - self.ab)
         self.register_buffer("w_snr", torch.as_tensor(np.minimum(snr, cfg.diffusion.snr_clip), dtype=torch.float32,
                                                       device=device))
-        self.timesteps = cfg.diffusion.timesteps
-        self.clip_noise = cfg.diffusion.clip_noise
         self.frame_stack = cfg.model.frame_stack
         self.boundary_weight = cfg.train.boundary_weight
         self.readout = readout  # frames -> positions (frozen), for the position levers
         self.boundary_readout = readout if cfg.train.boundary_space == "position" else None
         self.position_weight = cfg.train.position_weight
         self.clean_context = cfg.train.clean_context
-        self.context_t = dc.stabilization - 1  # the sampler's level-0 timestep (docs/reference.md §5)
 
     def forward(self, model: DFTransformer, x0: torch.Tensor, gen: torch.Generator,
                 validation: bool = False) -> torch.Tensor:
@@ -101,8 +113,7 @@ class DFLoss(torch.nn.Module):
         cut = torch.arange(t, device=dev)[None] >= terminal  # [B, T]
         k = torch.where(cut, self.timesteps - 1, k)
         weight = torch.where(cut, MASKED_WEIGHT, 1.0) * self.w_snr[k]  # [B, T]
-        noise = torch.randn(x0.shape, generator=gen, device=dev).clamp(-self.clip_noise, self.clip_noise)
-        xt = self.sqrt_ab[k][..., None] * x0 + self.sqrt_1m_ab[k][..., None] * noise
+        xt = self.noised(x0, k, gen)
         if self.clean_context and not validation:  # drawn last: with the lever off, every other draw is as before
             clean = torch.rand(b, generator=gen, device=dev) < self.clean_context
             k[:, 0] = torch.where(clean, self.context_t, k[:, 0])
@@ -157,7 +168,7 @@ def position_loss(pred: torch.Tensor, x0: torch.Tensor, weight: torch.Tensor, fr
     return (weight[..., None, None] * err).mean()
 
 
-class DiffuserLoss(torch.nn.Module):
+class DiffuserLoss(NoisingLoss):
     """Diffuser loss (Janner et al.): one uniform timestep per sample, start token clean, plain x0 MSE.
 
     The start token is fed exactly as the sampler feeds a level-0 token (timestep
@@ -166,14 +177,7 @@ class DiffuserLoss(torch.nn.Module):
     """
 
     def __init__(self, cfg: Config, device: torch.device):
-        super().__init__()
-        dc = cfg.diffusion
-        ab = alphas_cumprod(make_betas(dc.beta_schedule, dc.timesteps, dc.beta_start, dc.beta_end))
-        self.register_buffer("sqrt_ab", torch.as_tensor(np.sqrt(ab), dtype=torch.float32, device=device))
-        self.register_buffer("sqrt_1m_ab", torch.as_tensor(np.sqrt(1.0 - ab), dtype=torch.float32, device=device))
-        self.timesteps = dc.timesteps
-        self.t_start = dc.stabilization - 1  # the sampler's network timestep for a clean (level-0) token
-        self.clip_noise = dc.clip_noise
+        super().__init__(cfg, device)
         self.discount = cfg.train.loss_discount
 
     def frame_weights(self, plan_frames: int, device: torch.device) -> torch.Tensor:
@@ -186,10 +190,9 @@ class DiffuserLoss(torch.nn.Module):
         b, t, _ = x0.shape
         dev = x0.device
         k = torch.randint(0, self.timesteps, (b, 1), generator=gen, device=dev).expand(b, t - 1)
-        k = torch.cat((torch.full((b, 1), self.t_start, dtype=k.dtype, device=dev), k), dim=1)  # [B, T]
-        noise = torch.randn(x0.shape, generator=gen, device=dev).clamp(-self.clip_noise, self.clip_noise)
-        xt = self.sqrt_ab[k][..., None] * x0 + self.sqrt_1m_ab[k][..., None] * noise
-        xt = torch.cat((self.sqrt_ab[self.t_start] * x0[:, :1], xt[:, 1:]), dim=1)
+        k = torch.cat((torch.full((b, 1), self.context_t, dtype=k.dtype, device=dev), k), dim=1)  # [B, T]
+        xt = self.noised(x0, k, gen)
+        xt = torch.cat((self.sqrt_ab[self.context_t] * x0[:, :1], xt[:, 1:]), dim=1)
         err = (model(xt, k)[:, 1:] - x0[:, 1:]).square()  # [B, T-1, D]
         return (self.frame_weights(t - 1, dev)[None, :, None] * err).mean()
 
