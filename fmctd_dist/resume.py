@@ -176,6 +176,11 @@ class TrainRun:
         self.bar.close()
 
 
+def stream_rng(*keys: int) -> np.random.Generator:
+    """A loop's numpy RNG for one stream, e.g. (seed, BATCH_STREAM): streams of one seed never overlap."""
+    return np.random.Generator(np.random.PCG64(np.random.SeedSequence(list(keys))))
+
+
 def part_states(**parts: Any) -> dict[str, Any]:
     """train_state entries of a loop's stateful parts, by key: a numpy or torch generator's state, a module's
     weights (on the CPU), anything else's ``state_dict()`` (an optimiser)."""

@@ -34,8 +34,7 @@ from fmctd_dist.diffusion.models import build_model
 from fmctd_dist.diffusion.schedule import alphas_cumprod, make_betas
 from fmctd_dist.errors import ConfigError, DatasetError
 from fmctd_dist.resume import SNAPSHOTS, TrainRun, check_resume, load_part_states, load_train_state, part_states, \
-    save_train_state, snapshot_due
-
+    save_train_state, snapshot_due, stream_rng
 CONTEXT_T_MAX = 250  # with prob. 0.5 the context token's timestep is resampled in [0, 250)
 MASKED_WEIGHT = 0.05  # loss weight of tokens past the random terminal (they are pure noise)
 VAL_NOISE_SEED = 12345  # fixed noise for validation so losses are comparable across steps
@@ -302,7 +301,7 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
     opt = torch.optim.AdamW(model.parameters(), lr=tc.lr, betas=(0.9, 0.999), weight_decay=tc.weight_decay)
     readout, readout_provenance = position_readout(cfg, data, device)
     loss_fn = make_loss(cfg, device, readout)
-    rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence([tc.seed, data.seed])))
+    rng = stream_rng(tc.seed, data.seed)
     gen = torch.Generator(device=device).manual_seed(tc.seed)
     saved: dict[str, Any] = {"history": {"val": [], "train": []}}  # step, clock and history to continue from
     init_from = None  # provenance of train.init_from weights, kept by every later save and resume

@@ -31,16 +31,11 @@ from fmctd_dist.control.policy.network import GoalPolicyNet, build_net
 from fmctd_dist.device import set_threads
 from fmctd_dist.errors import CheckpointError
 from fmctd_dist.resume import TrainRun, check_resume, load_part_states, load_train_state, part_states, \
-    save_train_state
-
+    save_train_state, stream_rng
 BATCH_STREAM, VAL_STREAM, NORM_STREAM = 3, 4, 5  # SeedSequence([policy.seed, stream])
 NORM_ROWS = 65_536  # hindsight pairs whose inputs set the network's input normalisation
 RESUME_FIELDS = ("policy.seed", "policy.hidden", "policy.geom_p", "policy.geom_draws", "policy.max_subgoal_dist",
                  "policy.drop_fallen", "policy.batch_size")
-
-
-def _rng(seed: int, stream: int) -> np.random.Generator:
-    return np.random.Generator(np.random.PCG64(np.random.SeedSequence([seed, stream])))
 
 
 def make_batch(rows: Any, i: np.ndarray, j: np.ndarray, max_dist: float) -> tuple[torch.Tensor, torch.Tensor]:
@@ -94,11 +89,11 @@ def train_policy(cfg: Config, pcfg: PolicyConfig, hooks: Any, out_dir: str | Pat
             return _finished(read_policy_manifest(out, spec), out)
 
     net = build_net(p.hidden, spec.in_dim, spec.act_dim, p.seed)
-    ni, nj = pairs(train_rows, _rng(p.seed, NORM_STREAM), NORM_ROWS, pcfg)
+    ni, nj = pairs(train_rows, stream_rng(p.seed, NORM_STREAM), NORM_ROWS, pcfg)
     net.set_normaliser(make_batch(train_rows, ni, nj, p.max_subgoal_dist)[0].numpy())
     opt = torch.optim.AdamW(net.parameters(), lr=p.lr, weight_decay=p.weight_decay)
-    rng = _rng(p.seed, BATCH_STREAM)
-    vi, vj = pairs(val_rows, _rng(p.seed, VAL_STREAM), p.val_rows, pcfg)
+    rng = stream_rng(p.seed, BATCH_STREAM)
+    vi, vj = pairs(val_rows, stream_rng(p.seed, VAL_STREAM), p.val_rows, pcfg)
     vx, vy = make_batch(val_rows, vi, vj, p.max_subgoal_dist)
     floor = hooks.floor(cfg, val_rows, vi)
     reach: dict[str, Any] | None = None

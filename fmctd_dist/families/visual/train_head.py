@@ -29,15 +29,10 @@ from fmctd_dist.families.visual.load import LoadedVAE, load_vae
 from fmctd_dist.families.visual.mlp import LatentMLP, build_mlp, triples
 from fmctd_dist.families.visual.vae import encode_frames
 from fmctd_dist.resume import TrainRun, check_resume, load_part_states, load_train_state, part_states, \
-    save_train_state
-
+    save_train_state, stream_rng
 BATCH_STREAM, VAL_STREAM = 41, 42
 POINT_STEP = 0.2  # the point maze moves 0.2 * action per step in open floor (its data: x_{t+1} - x_t = 0.2 a_t)
 RESUME_FIELDS = ("hidden", "batch_size", "seed")
-
-
-def _rng(seed: int, stream: int) -> np.random.Generator:
-    return np.random.Generator(np.random.PCG64(np.random.SeedSequence([seed, stream])))
 
 
 def _sample(mu: np.ndarray, std: np.ndarray, rng: np.random.Generator) -> np.ndarray:
@@ -104,8 +99,8 @@ def train_head(cfg: Config, pcfg: PartsConfig, part: str, progress: bool = True)
     net = build_mlp(window * vae.latent_dim, 2, h.hidden, h.seed)
     net.set_normaliser(d["mu"], d["y"])
     opt = torch.optim.Adam(net.parameters(), lr=h.lr)
-    rng = _rng(h.seed, BATCH_STREAM)
-    val_z = _sample(d["val_mu"], d["val_std"], _rng(h.seed, VAL_STREAM))
+    rng = stream_rng(h.seed, BATCH_STREAM)
+    val_z = _sample(d["val_mu"], d["val_std"], stream_rng(h.seed, VAL_STREAM))
     if state is not None:
         load_part_states(state, net=net, opt=opt, rng=rng)
     run = TrainRun(f"{part} {cfg.env.name}", h.max_steps, state or {"history": {"train": [], "val": []}},

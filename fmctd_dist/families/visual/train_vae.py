@@ -24,8 +24,7 @@ from fmctd_dist.families.visual.config import PartsConfig, part_dir
 from fmctd_dist.families.visual.frames import FrameSet, load_frame_set
 from fmctd_dist.families.visual.vae import ConvVAE, encode_frames, psnr, recon_mse, vae_loss
 from fmctd_dist.resume import Clock, TrainRun, check_resume, load_part_states, load_train_state, part_states, \
-    save_train_state
-
+    save_train_state, stream_rng
 BATCH_STREAM, NOISE_SEED_OFFSET = 31, 1_000_003
 RESUME_FIELDS = ("latent_dim", "channels", "kl_weight", "batch_size", "seed")
 
@@ -65,7 +64,7 @@ def train_vae(cfg: Config, pcfg: PartsConfig, progress: bool = True, frames: Fra
 
     net = build_vae(v.latent_dim, v.channels, v.seed)
     opt = torch.optim.Adam(net.parameters(), lr=v.lr)
-    rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence([v.seed, BATCH_STREAM])))
+    rng = stream_rng(v.seed, BATCH_STREAM)
     gen = torch.Generator().manual_seed(v.seed + NOISE_SEED_OFFSET)
     if state is not None:
         load_part_states(state, net=net, opt=opt, rng=rng, gen=gen)

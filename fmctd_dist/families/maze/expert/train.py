@@ -25,8 +25,7 @@ from fmctd_dist.families.maze.expert.sac import SAC, ReplayBuffer
 from fmctd_dist.device import set_threads
 from fmctd_dist.errors import CheckpointError
 from fmctd_dist.resume import TrainRun, check_resume, load_part_states, load_train_state, part_states, \
-    save_train_state
-
+    save_train_state, stream_rng
 RNG_STREAM = 2  # SeedSequence([seed, RNG_STREAM]): random warm-up actions and replay indices
 RECENT = 20  # episodes in the progress bar's running means
 # Fields a resumed run must share with the saved one (everything else may change between runs).
@@ -43,7 +42,7 @@ def train_expert(cfg: AntExpertConfig, out_dir: str | Path | None = None, progre
     eval_env = make_eval_env(cfg.env, cfg.eval)
     agent = SAC(OBS_DIM, ACT_DIM, cfg.sac, seed=seed)
     buffer = ReplayBuffer(cfg.sac.buffer_size, OBS_DIM, ACT_DIM)
-    rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence([seed, RNG_STREAM])))
+    rng = stream_rng(seed, RNG_STREAM)
     ep = {"ret": 0.0, "len": 0, "speed": 0.0}
 
     state = load_train_state(out_dir)
