@@ -71,7 +71,9 @@ def run_cube_episode(cfg: Config, env: CubeEpisodes, planner: Planner, policy: C
     rules = CubeValue()
     every = replan_interval(cfg)
     cubes, effector, targets = [env.state(obs)], [obs[EFFECTOR]], []
-    steps, success, releases, chosen, last_target = 0, False, 0, [], -1
+    steps, success = 0, False
+    releases, chosen = 0, []
+    last_target = -1
 
     def step(action: np.ndarray, target: int) -> None:
         nonlocal obs, success, steps

@@ -32,7 +32,8 @@ def run_episode(cfg: Config, env: PointMaze, planner: Planner, task: int, seed: 
     reset = env.reset(task, seed)
     obs, goal = reset.obs, reset.goal
     pos = obs[:2]  # the planner's state: x, y (the ant's observation has 27 more features)
-    traj, steps, success = [pos], 0, False
+    traj = [pos]
+    steps, success = 0, False
     while steps < cfg.env.max_steps and not success:
         out = tally.plan(planner, pos, goal)
         if out is None:

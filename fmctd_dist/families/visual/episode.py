@@ -38,7 +38,8 @@ def run_visual_episode(cfg: Config, env: Any, encode: Encoder, invdyn: InverseDy
     z = encode(env.image()[None])[0]
     z_goal = encode(env.goal_image()[None])[0]
     z_prev = z
-    traj, steps, success = [pos], 0, False
+    traj = [pos]
+    steps, success = 0, False
     while steps < cfg.env.max_steps and not success:
         out = tally.plan(planner, frames.of_latents(z), frames.of_latents(z_goal))
         if out is None:

@@ -128,7 +128,8 @@ def _recent(hist: dict[str, Any]) -> dict[str, Any]:
 def _shown(hist: dict[str, Any], upd: dict[str, float] | None) -> dict[str, float | None]:
     """The progress bar's running means, last success rate and entropy temperature (None: not yet)."""
     r = _recent(hist)
-    succ, alpha = hist["eval"][-1]["success"] if hist["eval"] else None, None if upd is None else upd["alpha"]
+    succ = hist["eval"][-1]["success"] if hist["eval"] else None
+    alpha = None if upd is None else upd["alpha"]
     return {"ret": r["recent_return"], "v": r["recent_speed"], "succ": succ, "alpha": alpha}
 
 
