@@ -305,3 +305,28 @@ def test_plan_statuses_reads_back_what_the_tally_writes():
     assert list(plan_statuses(written)) == ["stay", "achieved", "early_stop"]  # first-seen order, for reports
     assert plan_statuses(PlanTally().columns()) == Counter()  # no plan yet
     assert plan_statuses({}) == Counter() == plan_statuses({"plan_status": None})  # rows that predate the column
+
+
+def test_an_episodes_tally_seeds_its_plans_and_stops_at_its_time_limit():
+    import numpy as np
+
+    from fmctd_dist.config import load_config
+    from fmctd_dist.evaluation.plan_tally import PlanTally
+    from fmctd_dist.planners.base import PlanOutput, plan_seed
+
+    class Slow:  # each plan takes 2 s of planning time and remembers its seed
+        seeds: list[int] = []
+
+        def plan(self, start, goal, seed):
+            self.seeds.append(seed)
+            return PlanOutput(np.full((3, 2), len(self.seeds), np.float32), "stay", 2.0, 1.0)
+
+    cfg, planner = load_config(["eval.episode_time_limit=3"]), Slow()
+    tally = PlanTally.episode(cfg, 4, 7)
+    assert tally.plan(planner, np.zeros(2), np.ones(2)) is not None  # 2 s: within the limit
+    assert tally.plan(planner, np.zeros(2), np.ones(2)) is None and tally.timed_out  # 4 s: over it
+    assert planner.seeds == [plan_seed(cfg.seed, 4, 7, k) for k in range(2)] and tally.first[0, 0] == 1
+    row = tally.row(True, 12)
+    assert list(row)[:7] == ["method", "env", "task", "seed", "success", "timed_out", "env_steps"]
+    assert (row["task"], row["seed"], row["success"], row["plans"], row["plan_time_s"]) == (4, 7, False, 2, 4.0)
+    assert row["episode_time_s"] >= 0 and list(row)[-1] == "episode_time_s"

@@ -1,4 +1,5 @@
-"""fmctd_dist.resume: the train state, the resume check, the budget clock and the snapshot cadence of every loop."""
+"""fmctd_dist.resume: the train state, the resume check, the budget clock, the step cadences, the parts' states and the
+snapshot cadence of every loop."""
 
 from __future__ import annotations
 
@@ -9,8 +10,8 @@ import pytest
 import torch
 
 from fmctd_dist.errors import CheckpointError
-from fmctd_dist.resume import SNAPSHOTS, TRAIN_STATE_FILE, Clock, check_resume, load_train_state, save_train_state, \
-    snapshot_due
+from fmctd_dist.resume import SNAPSHOTS, TRAIN_STATE_FILE, Clock, TrainRun, check_resume, load_part_states, \
+    load_train_state, part_states, save_train_state, snapshot_due, stream_rng
 
 
 def test_train_state_round_trips_atomically(tmp_path):
@@ -52,3 +53,31 @@ def test_snapshot_due_reads_the_folder(tmp_path):
     assert snapshot_due(tmp_path, 60.0, 130.0) == "k002"
     (tmp_path / SNAPSHOTS / "k002-step0000040").mkdir(parents=True)
     assert snapshot_due(tmp_path, 60.0, 130.0) is None and snapshot_due(tmp_path, 60.0, 180.0) == "k003"
+
+
+def test_train_run_keeps_the_cadences_and_the_history(tmp_path):
+    run = TrainRun("toy", 5, {"history": {"train": [], "val": []}}, progress=False, names=("step", "two"))
+    saves, logged = [], []
+    while not run.last:
+        run.tick(float(run.step), torch.tensor(2.0))  # a float and a device tensor, averaged per log window
+        if run.due(2):
+            logged.append(run.log())
+        run.checkpoint(3, lambda: saves.append(run.step))
+    run.close()
+    assert run.step == 5 and saves == [3, 5] and logged == [[0.5, 2.0], [2.5, 2.0], [4.0, 2.0]]
+    assert run.history["train"] == [[2, 0.5, 2.0], [4, 2.5, 2.0], [5, 4.0, 2.0]]
+    again = TrainRun("toy", 7, run.state(), progress=False)  # a rerun continues from the saved state
+    assert again.step == 5 and not again.last and again.clock.wall_s == run.clock.wall_s
+    assert TrainRun("toy", 9, {"step": 1, "wall_time_s": 10.0, "history": {}}, budget_s=5.0, progress=False).last
+
+
+def test_part_states_round_trip_every_kind_of_part():
+    net, rng, gen = torch.nn.Linear(2, 2), stream_rng(0, 1), torch.Generator().manual_seed(3)
+    opt = torch.optim.Adam(net.parameters())
+    saved = part_states(net=net, opt=opt, rng=rng, gen=gen)
+    a, b = rng.random(), torch.rand(1, generator=gen)
+    with torch.no_grad():
+        net.weight.zero_()
+    load_part_states(saved, net=net, rng=rng, gen=gen, opt=opt)
+    assert rng.random() == a and torch.equal(torch.rand(1, generator=gen), b) and net.weight.abs().sum() > 0
+    assert stream_rng(0, 1).random() != stream_rng(0, 2).random()

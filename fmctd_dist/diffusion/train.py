@@ -18,15 +18,12 @@ from __future__ import annotations
 
 import copy
 import math
-import time
 from pathlib import Path
 from typing import Any, Callable, Protocol
 
 import numpy as np
 import torch
-from tqdm import tqdm
 
-from fmctd_dist.artifacts import module_state
 from fmctd_dist.config import Config, git_sha, resolve_path
 from fmctd_dist.tokens import Normaliser
 from fmctd_dist.device import resolve_device, set_threads, warn_bf16
@@ -36,8 +33,8 @@ from fmctd_dist.diffusion.model import DFTransformer
 from fmctd_dist.diffusion.models import build_model
 from fmctd_dist.diffusion.schedule import alphas_cumprod, make_betas
 from fmctd_dist.errors import ConfigError, DatasetError
-from fmctd_dist.resume import SNAPSHOTS, Clock, check_resume, load_train_state, save_train_state, snapshot_due
-
+from fmctd_dist.resume import SNAPSHOTS, TrainRun, check_resume, load_part_states, load_train_state, part_states, \
+    save_train_state, snapshot_due, stream_rng
 CONTEXT_T_MAX = 250  # with prob. 0.5 the context token's timestep is resampled in [0, 250)
 MASKED_WEIGHT = 0.05  # loss weight of tokens past the random terminal (they are pure noise)
 VAL_NOISE_SEED = 12345  # fixed noise for validation so losses are comparable across steps
@@ -65,27 +62,39 @@ class TrainDataLike(Protocol):
     def val_batches(self, n: int, batch: int) -> list[np.ndarray]: ...
 
 
-class DFLoss(torch.nn.Module):
+class NoisingLoss(torch.nn.Module):
+    """What both losses share: the schedule's forward process, x_k = sqrt(ab_k) x0 + sqrt(1 - ab_k) noise with the
+    noise clipped to +-diffusion.clip_noise, and the sampler's timestep for a clean (level-0) token."""
+
+    def __init__(self, cfg: Config, device: torch.device):
+        super().__init__()
+        dc = cfg.diffusion
+        self.ab = ab = alphas_cumprod(make_betas(dc.beta_schedule, dc.timesteps, dc.beta_start, dc.beta_end))
+        self.register_buffer("sqrt_ab", torch.as_tensor(np.sqrt(ab), dtype=torch.float32, device=device))
+        self.register_buffer("sqrt_1m_ab", torch.as_tensor(np.sqrt(1.0 - ab), dtype=torch.float32, device=device))
+        self.timesteps, self.clip_noise = dc.timesteps, dc.clip_noise
+        self.context_t = dc.stabilization - 1  # docs/reference.md §5
+
+    def noised(self, x0: torch.Tensor, k: torch.Tensor, gen: torch.Generator) -> torch.Tensor:
+        """x0 [B, T, D] at per-token timesteps k [B, T]; the noise drawn from ``gen``."""
+        noise = torch.randn(x0.shape, generator=gen, device=x0.device).clamp(-self.clip_noise, self.clip_noise)
+        return self.sqrt_ab[k][..., None] * x0 + self.sqrt_1m_ab[k][..., None] * noise
+
+
+class DFLoss(NoisingLoss):
     """Diffusion Forcing loss: per-token timesteps, length randomisation, min-SNR-weighted x0 MSE."""
 
     def __init__(self, cfg: Config, device: torch.device, readout: Readout | None = None):
-        super().__init__()
-        dc = cfg.diffusion
-        ab = alphas_cumprod(make_betas(dc.beta_schedule, dc.timesteps, dc.beta_start, dc.beta_end))
-        snr = ab / (1.0 - ab)
-        self.register_buffer("sqrt_ab", torch.as_tensor(np.sqrt(ab), dtype=torch.float32, device=device))
-        self.register_buffer("sqrt_1m_ab", torch.as_tensor(np.sqrt(1.0 - ab), dtype=torch.float32, device=device))
+        super().__init__(cfg, device)
+        snr = self.ab / (1.0 - self.ab)
         self.register_buffer("w_snr", torch.as_tensor(np.minimum(snr, cfg.diffusion.snr_clip), dtype=torch.float32,
                                                       device=device))
-        self.timesteps = cfg.diffusion.timesteps
-        self.clip_noise = cfg.diffusion.clip_noise
         self.frame_stack = cfg.model.frame_stack
         self.boundary_weight = cfg.train.boundary_weight
         self.readout = readout  # frames -> positions (frozen), for the position levers
         self.boundary_readout = readout if cfg.train.boundary_space == "position" else None
         self.position_weight = cfg.train.position_weight
         self.clean_context = cfg.train.clean_context
-        self.context_t = dc.stabilization - 1  # the sampler's level-0 timestep (docs/reference.md §5)
 
     def forward(self, model: DFTransformer, x0: torch.Tensor, gen: torch.Generator,
                 validation: bool = False) -> torch.Tensor:
@@ -103,8 +112,7 @@ class DFLoss(torch.nn.Module):
         cut = torch.arange(t, device=dev)[None] >= terminal  # [B, T]
         k = torch.where(cut, self.timesteps - 1, k)
         weight = torch.where(cut, MASKED_WEIGHT, 1.0) * self.w_snr[k]  # [B, T]
-        noise = torch.randn(x0.shape, generator=gen, device=dev).clamp(-self.clip_noise, self.clip_noise)
-        xt = self.sqrt_ab[k][..., None] * x0 + self.sqrt_1m_ab[k][..., None] * noise
+        xt = self.noised(x0, k, gen)
         if self.clean_context and not validation:  # drawn last: with the lever off, every other draw is as before
             clean = torch.rand(b, generator=gen, device=dev) < self.clean_context
             k[:, 0] = torch.where(clean, self.context_t, k[:, 0])
@@ -159,7 +167,7 @@ def position_loss(pred: torch.Tensor, x0: torch.Tensor, weight: torch.Tensor, fr
     return (weight[..., None, None] * err).mean()
 
 
-class DiffuserLoss(torch.nn.Module):
+class DiffuserLoss(NoisingLoss):
     """Diffuser loss (Janner et al.): one uniform timestep per sample, start token clean, plain x0 MSE.
 
     The start token is fed exactly as the sampler feeds a level-0 token (timestep
@@ -168,14 +176,7 @@ class DiffuserLoss(torch.nn.Module):
     """
 
     def __init__(self, cfg: Config, device: torch.device):
-        super().__init__()
-        dc = cfg.diffusion
-        ab = alphas_cumprod(make_betas(dc.beta_schedule, dc.timesteps, dc.beta_start, dc.beta_end))
-        self.register_buffer("sqrt_ab", torch.as_tensor(np.sqrt(ab), dtype=torch.float32, device=device))
-        self.register_buffer("sqrt_1m_ab", torch.as_tensor(np.sqrt(1.0 - ab), dtype=torch.float32, device=device))
-        self.timesteps = dc.timesteps
-        self.t_start = dc.stabilization - 1  # the sampler's network timestep for a clean (level-0) token
-        self.clip_noise = dc.clip_noise
+        super().__init__(cfg, device)
         self.discount = cfg.train.loss_discount
 
     def frame_weights(self, plan_frames: int, device: torch.device) -> torch.Tensor:
@@ -188,10 +189,9 @@ class DiffuserLoss(torch.nn.Module):
         b, t, _ = x0.shape
         dev = x0.device
         k = torch.randint(0, self.timesteps, (b, 1), generator=gen, device=dev).expand(b, t - 1)
-        k = torch.cat((torch.full((b, 1), self.t_start, dtype=k.dtype, device=dev), k), dim=1)  # [B, T]
-        noise = torch.randn(x0.shape, generator=gen, device=dev).clamp(-self.clip_noise, self.clip_noise)
-        xt = self.sqrt_ab[k][..., None] * x0 + self.sqrt_1m_ab[k][..., None] * noise
-        xt = torch.cat((self.sqrt_ab[self.t_start] * x0[:, :1], xt[:, 1:]), dim=1)
+        k = torch.cat((torch.full((b, 1), self.context_t, dtype=k.dtype, device=dev), k), dim=1)  # [B, T]
+        xt = self.noised(x0, k, gen)
+        xt = torch.cat((self.sqrt_ab[self.context_t] * x0[:, :1], xt[:, 1:]), dim=1)
         err = (model(xt, k)[:, 1:] - x0[:, 1:]).square()  # [B, T-1, D]
         return (self.frame_weights(t - 1, dev)[None, :, None] * err).mean()
 
@@ -301,9 +301,9 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
     opt = torch.optim.AdamW(model.parameters(), lr=tc.lr, betas=(0.9, 0.999), weight_decay=tc.weight_decay)
     readout, readout_provenance = position_readout(cfg, data, device)
     loss_fn = make_loss(cfg, device, readout)
-    rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence([tc.seed, data.seed])))
+    rng = stream_rng(tc.seed, data.seed)
     gen = torch.Generator(device=device).manual_seed(tc.seed)
-    step, wall, cpu, history, resumed_from = 0, 0.0, 0.0, {"val": [], "train": []}, None
+    saved: dict[str, Any] = {"history": {"val": [], "train": []}}  # step, clock and history to continue from
     init_from = None  # provenance of train.init_from weights, kept by every later save and resume
     ema = copy.deepcopy(model).requires_grad_(False)  # what gets shipped (ema_decay=0: a plain copy)
 
@@ -313,15 +313,9 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
         check_compatible({"config": state["config"], "n_tokens": state["n_tokens"]}, cfg, out_dir)
         check_resume(out_dir, "planner", "train.out", {}, {}, data=[("dataset", state["dataset_digest"], data.digest)],
                      data_fix=same_data)
-        model.load_state_dict(state["model"])
+        load_part_states(state, model=model, optimizer=opt, numpy_rng=rng, torch_rng=gen)
         ema.load_state_dict(state.get("ema", state["model"]))  # runs from before EMA start it here
-        opt.load_state_dict(state["optimizer"])
-        rng.bit_generator.state = state["numpy_rng"]
-        gen.set_state(state["torch_rng"])
-        step, wall, history = int(state["step"]), float(state["wall_time_s"]), state["history"]
-        cpu = float(state.get("cpu_time_s", wall))
-        init_from = state.get("init_from")
-        resumed_from = step
+        saved, init_from = state, state.get("init_from")
     elif (out_dir / "manifest.json").exists():
         # A shipped checkpoint (model.pt + manifest, no train_state.pt: that is not committed).
         # Continue from its weights and step with a fresh optimiser rather than overwrite it.
@@ -330,19 +324,20 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
                      data=[("dataset", manifest["dataset_digest"], data.digest)], data_fix=same_data)
         model.load_state_dict(shipped.state_dict())
         ema.load_state_dict(shipped.state_dict())
-        step, wall = int(manifest["train_steps"]), float(manifest["wall_time_s"])
-        cpu = float(manifest.get("cpu_time_s", wall))
+        step = int(manifest["train_steps"])
+        saved = {"step": step, "wall_time_s": manifest["wall_time_s"], "cpu_time_s": manifest.get("cpu_time_s"),
+                 "history": {"val": [list(v) for v in manifest.get("val_history", [])], "train": [],
+                             "optimizer_reset_at": [step]}}
         init_from = manifest.get("init_from")
-        history = {"val": [list(v) for v in manifest.get("val_history", [])], "train": [],
-                   "optimizer_reset_at": [step]}
-        resumed_from = step
     elif tc.init_from:
         weights, init_from = load_init_weights(resolve_path(tc.init_from), cfg)
         model.load_state_dict(weights)
         ema.load_state_dict(weights)
-    done = step >= tc.max_steps or Clock(wall, cpu, tc.budget_clock).over(tc.time_budget_s)
-    if resumed_from is not None and done:  # finished, by steps or by its time budget
-        return _summary(step, wall, history, out_dir, model, resumed_from)
+    run = TrainRun("train", tc.max_steps, saved, tc.time_budget_s, tc.budget_clock, progress)
+    resumed_from = None if "step" not in saved else run.step
+    if resumed_from is not None and run.last:  # finished, by steps or by its time budget
+        run.close()
+        return _summary(run.step, run.clock.wall_s, run.history, out_dir, model, resumed_from)
 
     val = [torch.as_tensor(v, dtype=torch.float32, device=device) for v in data.val_batches(tc.val_batches,
                                                                                         tc.batch_size)]
@@ -354,28 +349,23 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
         base["init_from"] = init_from
 
     def save() -> None:
-        wall, cpu = clock.wall_s, clock.cpu_s
-        summary = _summary(step, wall, history, out_dir, model, resumed_from)
+        step, wall, cpu = run.step, run.clock.wall_s, run.clock.cpu_s
+        summary = _summary(step, wall, run.history, out_dir, model, resumed_from)
         fields = {**base, "ema_decay": tc.ema_decay, "config": cfg.to_dict(), "train_steps": step, "wall_time_s": wall,
                   "cpu_time_s": cpu, "vs_paper": vs_paper(cfg, step), "final_losses": summary["final_losses"],
-                  "val_history": history["val"]}
+                  "val_history": run.history["val"]}
         fields.update(lineage(fields))  # steps, CPU time and samples, through every init_from ancestor
         save_checkpoint(out_dir, ema, fields)
-        snap = snapshot_due(out_dir, tc.snapshot_every_s, cpu if clock.kind == "cpu" else wall)
+        snap = snapshot_due(out_dir, tc.snapshot_every_s, cpu if run.clock.kind == "cpu" else wall)
         if snap is not None:
             save_checkpoint(out_dir / SNAPSHOTS / f"{snap}-step{step:07d}", ema, fields)
         save_train_state(out_dir, {
-            "model": module_state(model), "ema": module_state(ema), "optimizer": opt.state_dict(),
-            "step": step, "wall_time_s": wall, "cpu_time_s": cpu,
-            "numpy_rng": rng.bit_generator.state, "torch_rng": gen.get_state(), "history": history,
+            **part_states(model=model, ema=ema, optimizer=opt, numpy_rng=rng, torch_rng=gen), **run.state(),
             "config": cfg.to_dict(), "dataset_digest": data.digest, "n_tokens": cfg.n_tokens, "init_from": init_from,
         })
 
     model.train()
-    bar = tqdm(total=tc.max_steps, initial=step, disable=not progress, desc="train", dynamic_ncols=True)
-    running, n_running, t_log = torch.zeros((), device=device), 0, time.perf_counter()
-    clock = Clock(wall, cpu, tc.budget_clock)
-    while step < tc.max_steps:
+    while not run.last:
         x0 = torch.as_tensor(data.sample(rng, tc.batch_size), dtype=torch.float32, device=device)
         if x0.shape[1:] != (cfg.n_tokens, cfg.token_dim):
             raise DatasetError(
@@ -383,7 +373,7 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
                 f"({cfg.n_tokens}, {cfg.token_dim}); data.train_window, env.horizon, jump and model.frame_stack "
                 "must describe the same windows"
             )
-        lr = lr_at(cfg, step, clock.used())
+        lr = lr_at(cfg, run.step, run.clock.used())
         for group in opt.param_groups:
             group["lr"] = lr
         with torch.autocast(device.type, dtype=torch.bfloat16, enabled=tc.precision == "bf16"):
@@ -391,29 +381,18 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
         opt.zero_grad(set_to_none=True)
         loss.backward()
         opt.step()
-        update_ema(ema, model, tc.ema_decay, step)
-        step += 1
-        running += loss.detach()
-        n_running += 1
-        last = step == tc.max_steps or clock.over(tc.time_budget_s)
-        if step % LOG_EVERY == 0 or last:
-            mean = float(running) / n_running
+        update_ema(ema, model, tc.ema_decay, run.step)
+        run.tick(loss.detach().float())  # summed on the device: one sync per log
+        if run.due(LOG_EVERY):
+            mean = run.log()[0]
             if not np.isfinite(mean):
-                raise FloatingPointError(f"training loss is {mean} at step {step}; lower train.lr or check the data")
-            now = time.perf_counter()
-            history["train"].append([step, mean])
-            bar.set_postfix(loss=f"{mean:.4f}", steps_s=f"{n_running / (now - t_log):.1f}")
-            bar.update(n_running)
-            running, n_running, t_log = torch.zeros((), device=device), 0, now
-        if tc.val_every > 0 and (step % tc.val_every == 0 or last):
-            history["val"].append([step, validation_loss(ema, loss_fn, val, device)])
-        if step % tc.ckpt_every == 0 or last:
-            clock.lap()
-            save()
-        if last:
-            break
-    bar.close()
-    return _summary(step, clock.wall_s, history, out_dir, model, resumed_from)
+                raise FloatingPointError(f"training loss is {mean} at step {run.step}; lower train.lr or check the "
+                                         "data")
+        if tc.val_every > 0 and run.due(tc.val_every):
+            run.history["val"].append([run.step, validation_loss(ema, loss_fn, val, device)])
+        run.checkpoint(tc.ckpt_every, save)
+    run.close()
+    return _summary(run.step, run.clock.wall_s, run.history, out_dir, model, resumed_from)
 
 
 @torch.no_grad()

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -11,7 +10,7 @@ import numpy as np
 
 from fmctd_dist.config import Config
 from fmctd_dist.evaluation.plan_tally import PlanTally
-from fmctd_dist.planners.base import Planner, plan_seed
+from fmctd_dist.planners.base import Planner
 from fmctd_dist.search.actions import Actions, scale_actions
 from fmctd_dist.search.value_rule import MazeValue, PlanValue
 
@@ -47,21 +46,17 @@ class ToyEpisodes:
         self.cfg = cfg
 
     def run(self, planner: Planner, task: int, seed: int) -> dict[str, Any]:
-        t0, env, tally = time.perf_counter(), Plane(), PlanTally()
+        env, tally = Plane(), PlanTally.episode(self.cfg, task, seed, 0.0)
         pos, goal = env.reset(task)
-        out = planner.plan(pos, goal, plan_seed(self.cfg.seed, task, seed, 0))
-        tally.add(out)
+        tally.plan(planner, pos, goal)  # one plan (0.0: no episode time limit), followed to its end
         traj, success, steps = [pos], False, 0
-        for waypoint in out.waypoints:
+        for waypoint in tally.first:
             pos, success = env.step(waypoint - pos)
             traj.append(pos)
             steps += 1
             if success or steps >= self.cfg.env.max_steps:
                 break
-        return {"method": self.cfg.method.name, "env": self.cfg.env.name, "task": int(task), "seed": int(seed),
-                "success": success, "timed_out": False, "env_steps": steps, **tally.columns(),
-                "episode_time_s": time.perf_counter() - t0,
-                "plan_xy": np.asarray(out.waypoints, np.float32).reshape(-1).tolist(),
+        return {**tally.row(success, steps), "plan_xy": np.asarray(tally.first, np.float32).reshape(-1).tolist(),
                 "traj_xy": np.asarray(traj, np.float32).reshape(-1).tolist()}
 
 

@@ -21,7 +21,6 @@ from typing import Any
 
 import numpy as np
 import torch
-from tqdm import tqdm
 
 from fmctd_dist.config import Config, git_sha
 from fmctd_dist.artifacts import MANIFEST_FILE
@@ -31,16 +30,12 @@ from fmctd_dist.control.policy.hindsight import sample_pairs
 from fmctd_dist.control.policy.network import GoalPolicyNet, build_net
 from fmctd_dist.device import set_threads
 from fmctd_dist.errors import CheckpointError
-from fmctd_dist.resume import Clock, check_resume, load_train_state, save_train_state
-
+from fmctd_dist.resume import TrainRun, check_resume, load_part_states, load_train_state, part_states, \
+    save_train_state, stream_rng
 BATCH_STREAM, VAL_STREAM, NORM_STREAM = 3, 4, 5  # SeedSequence([policy.seed, stream])
 NORM_ROWS = 65_536  # hindsight pairs whose inputs set the network's input normalisation
 RESUME_FIELDS = ("policy.seed", "policy.hidden", "policy.geom_p", "policy.geom_draws", "policy.max_subgoal_dist",
                  "policy.drop_fallen", "policy.batch_size")
-
-
-def _rng(seed: int, stream: int) -> np.random.Generator:
-    return np.random.Generator(np.random.PCG64(np.random.SeedSequence([seed, stream])))
 
 
 def make_batch(rows: Any, i: np.ndarray, j: np.ndarray, max_dist: float) -> tuple[torch.Tensor, torch.Tensor]:
@@ -94,24 +89,21 @@ def train_policy(cfg: Config, pcfg: PolicyConfig, hooks: Any, out_dir: str | Pat
             return _finished(read_policy_manifest(out, spec), out)
 
     net = build_net(p.hidden, spec.in_dim, spec.act_dim, p.seed)
-    ni, nj = pairs(train_rows, _rng(p.seed, NORM_STREAM), NORM_ROWS, pcfg)
+    ni, nj = pairs(train_rows, stream_rng(p.seed, NORM_STREAM), NORM_ROWS, pcfg)
     net.set_normaliser(make_batch(train_rows, ni, nj, p.max_subgoal_dist)[0].numpy())
     opt = torch.optim.AdamW(net.parameters(), lr=p.lr, weight_decay=p.weight_decay)
-    rng = _rng(p.seed, BATCH_STREAM)
-    vi, vj = pairs(val_rows, _rng(p.seed, VAL_STREAM), p.val_rows, pcfg)
+    rng = stream_rng(p.seed, BATCH_STREAM)
+    vi, vj = pairs(val_rows, stream_rng(p.seed, VAL_STREAM), p.val_rows, pcfg)
     vx, vy = make_batch(val_rows, vi, vj, p.max_subgoal_dist)
     floor = hooks.floor(cfg, val_rows, vi)
-    step, wall, resumed_from = 0, 0.0, None
-    hist: dict[str, list[list[float]]] = {"train": [], "val": []}  # [step, loss]
     reach: dict[str, Any] | None = None
     if state is not None:
-        net.load_state_dict(state["net"])
-        opt.load_state_dict(state["opt"])
+        load_part_states(state, net=net, opt=opt, rng=rng)
         for group in opt.param_groups:  # policy.lr may change between runs
             group["lr"] = p.lr
-        rng.bit_generator.state = state["rng"]
-        step, wall, hist, resumed_from = int(state["step"]), float(state["wall_time_s"]), state["history"], \
-            int(state["step"])
+    run = TrainRun(f"policy {cfg.env.name}", p.max_steps, state or {"history": {"train": [], "val": []}},
+                   progress=progress)  # history: [step, loss]
+    hist, resumed_from = run.history, None if state is None else run.step
 
     dataset = {**hooks.dataset_fields(cfg, data_manifest), "sha256": data_sha, "digest": data_sha["train"][:16],
                "episodes": data_manifest["episodes"], "episode_steps": data_manifest["episode_steps"],
@@ -128,52 +120,36 @@ def train_policy(cfg: Config, pcfg: PolicyConfig, hooks: Any, out_dir: str | Pat
     def save() -> None:
         save_policy(out, net, spec, {
             "config": pcfg.to_dict(), "env": cfg.env.name, "dataset": dataset, "git_sha": git_sha(),
-            "steps": step, "wall_time_s": wall, "metrics": metrics(), "val_history": hist["val"],
+            "steps": run.step, "wall_time_s": run.clock.wall_s, "metrics": metrics(), "val_history": hist["val"],
             "data_config": {k: getattr(cfg.data, k) for k in ("root", "seed", "episodes", "episode_steps", "noise",
                                                               "expert")},
         })
-        save_train_state(out, {"net": net.state_dict(), "opt": opt.state_dict(), "rng": rng.bit_generator.state,
-                               "step": step, "wall_time_s": wall, "history": hist, "config": pcfg.to_dict(),
+        save_train_state(out, {**part_states(net=net, opt=opt, rng=rng), **run.state(), "config": pcfg.to_dict(),
                                "env": cfg.env.name, "dataset_sha256": data_sha})
 
-    bar = tqdm(total=p.max_steps, initial=step, disable=not progress, desc=f"policy {cfg.env.name}",
-               dynamic_ncols=True)
-    clock = Clock(wall)
-    t_log, stopped = clock.started, None
-    n_log, loss_sum = 0, 0.0
+    stopped = None
     net.train()
-    while step < p.max_steps:
+    while not run.last:
         i, j = pairs(train_rows, rng, p.batch_size, pcfg)
         x, y = make_batch(train_rows, i, j, p.max_subgoal_dist)
         loss = (net(x) - y).square().mean()
         opt.zero_grad(set_to_none=True)
         loss.backward()
         opt.step()
-        step += 1
-        n_log += 1
-        loss_sum += float(loss.detach())
-        if step % p.log_every == 0 or step == p.max_steps:
-            now = time.perf_counter()
-            hist["train"].append([step, loss_sum / n_log])
-            post = {"loss": f"{loss_sum / n_log:.4f}", "steps_s": f"{n_log / (now - t_log):.0f}"}
-            if hist["val"]:
-                post["val"] = f"{hist['val'][-1][1]:.4f}"
-            bar.set_postfix(post, refresh=False)
-            bar.update(n_log)
-            n_log, loss_sum, t_log = 0, 0.0, now
-        if step % p.val_every == 0 or step == p.max_steps:
-            hist["val"].append([step, mse(net, vx, vy)])
-        if step == p.max_steps and pcfg.reach.rows > 0:
+        run.tick(float(loss.detach()))
+        if run.due(p.log_every):
+            run.log()
+        if run.due(p.val_every):
+            hist["val"].append([run.step, mse(net, vx, vy)])
+        if run.last and pcfg.reach.rows > 0:
             reach = run_reach(cfg, pcfg, hooks, net, val_rows)
-        if step % p.ckpt_every == 0 or step == p.max_steps:
-            now, wall = clock.lap(), clock.wall_s
-            save()
-            if p.time_budget_s > 0 and now - clock.started >= p.time_budget_s and step < p.max_steps:  # per call
-                stopped = f"policy.time_budget_s={p.time_budget_s:g} reached at step {step}; rerun to continue"
-                break
-    bar.close()
-    return {"step": step, "wall_time_s": wall, "out_dir": str(out), "resumed_from": resumed_from, "name": spec.name,
-            "rows": dataset["rows"], "stopped": stopped, **metrics()}
+        saved = run.checkpoint(p.ckpt_every, save)
+        if saved and not run.last and 0 < p.time_budget_s <= time.perf_counter() - run.clock.started:  # per call
+            stopped = f"policy.time_budget_s={p.time_budget_s:g} reached at step {run.step}; rerun to continue"
+            break
+    run.close()
+    return {"step": run.step, "wall_time_s": run.clock.wall_s, "out_dir": str(out), "resumed_from": resumed_from,
+            "name": spec.name, "rows": dataset["rows"], "stopped": stopped, **metrics()}
 
 
 def run_reach(cfg: Config, pcfg: PolicyConfig, hooks: Any, net: GoalPolicyNet, val_rows: Any) -> dict[str, Any]:

@@ -17,7 +17,6 @@ maze episode, a pure function of (config, checkpoints, task, seed).
 
 from __future__ import annotations
 
-import time
 from typing import Any, Callable
 
 import numpy as np
@@ -29,7 +28,7 @@ from fmctd_dist.families.maze.subgoal import SubgoalTracker
 from fmctd_dist.families.cube.env import CubeEpisodes
 from fmctd_dist.families.cube.failures import on_cube, why_failed
 from fmctd_dist.evaluation.plan_tally import PlanTally
-from fmctd_dist.planners.base import Planner, plan_seed
+from fmctd_dist.planners.base import Planner
 from fmctd_dist.families.cube.value import CubeValue
 
 CubePolicy = Callable[[np.ndarray, np.ndarray], np.ndarray]  # (view [28], subgoal [3]) -> action [5]
@@ -65,17 +64,15 @@ def replan_interval(cfg: Config) -> int:
 def run_cube_episode(cfg: Config, env: CubeEpisodes, planner: Planner, policy: CubePolicy, task: int, seed: int,
                      time_limit_s: float | None = None) -> dict[str, Any]:
     """Run one episode; return its row (without the run-level provenance fields)."""
-    limit = cfg.eval.episode_time_limit if time_limit_s is None else time_limit_s
-    t_episode = time.perf_counter()
+    tally = PlanTally.episode(cfg, task, seed, time_limit_s)
     reset = env.reset(task, seed)
     obs, goal, n = reset.obs, reset.goal, env.n_cubes
     goal_c = goal.reshape(n, 3)
     rules = CubeValue()
     every = replan_interval(cfg)
     cubes, effector, targets = [env.state(obs)], [obs[EFFECTOR]], []
-    steps, success, timed_out = 0, False, False
-    tally, releases = PlanTally(), 0
-    chosen, first_plan = [], None
+    steps, success = 0, False
+    releases, chosen = 0, []
     last_target = -1
 
     def step(action: np.ndarray, target: int) -> None:
@@ -94,13 +91,10 @@ def run_cube_episode(cfg: Config, env: CubeEpisodes, planner: Planner, policy: C
 
     while steps < cfg.env.max_steps and not success:
         state = env.state(obs)
-        out = planner.plan(state, goal, plan_seed(cfg.seed, task, seed, tally.plans))
-        tally.add(out)
-        plan = np.asarray(out.waypoints, np.float64).reshape(-1, n, 3)  # [F, N, 3] one per env step
-        first_plan = plan if first_plan is None else first_plan
-        if out.timed_out or (limit and tally.plan_time_s > limit):
-            timed_out = True
+        out = tally.plan(planner, state, goal)
+        if out is None:
             break
+        plan = np.asarray(out.waypoints, np.float64).reshape(-1, n, 3)  # [F, N, 3] one per env step
         cubes_now = state.reshape(n, 3)
         carrying = (last_target >= 0 and cubes_now[last_target, 2] > CARRY_Z
                     and not on_cube(cubes_now[None])[0, last_target])
@@ -125,23 +119,16 @@ def run_cube_episode(cfg: Config, env: CubeEpisodes, planner: Planner, policy: C
             step(np.asarray(policy(cube_view(obs, target), subgoal), np.float64), target)
             k += 1
     traj = np.asarray(cubes, np.float32)  # [T+1, 3N]
-    success = bool(success and not timed_out)
+    row = tally.row(success, steps)
     return {
-        "method": cfg.method.name,
-        "env": cfg.env.name,
-        "task": int(task),
-        "seed": int(seed),
-        "success": success,
-        "timed_out": timed_out,
-        "env_steps": steps,
-        **tally.columns(),
-        "episode_time_s": time.perf_counter() - t_episode,
+        **row,
         "n_cubes": n,
         "targets": ",".join(str(t) for t in chosen),  # the target cube of each plan
         "releases": releases,
-        "why_failed": why_failed(traj.reshape(-1, n, 3), np.asarray(targets, np.int64), goal_c, success, timed_out),
+        "why_failed": why_failed(traj.reshape(-1, n, 3), np.asarray(targets, np.int64), goal_c, row["success"],
+                                 tally.timed_out),
         "goal_cubes": goal.astype(np.float32).tolist(),  # [3N]
-        "plan_cubes": np.asarray(first_plan, np.float32).reshape(-1).tolist(),  # [F * 3N], the first plan
+        "plan_cubes": np.asarray(tally.first, np.float32).reshape(-1).tolist(),  # [F * 3N], the first plan
         "traj_cubes": traj.reshape(-1).tolist(),  # [(T+1) * 3N] cube xyz per step, obs units
         "traj_effector": np.asarray(effector, np.float32).reshape(-1).tolist(),  # [(T+1) * 3]
     }

@@ -9,7 +9,6 @@ start/goal noise under ``env.protocol=ogbench``), so an episode is a pure functi
 
 from __future__ import annotations
 
-import time
 from typing import Any
 
 import numpy as np
@@ -18,7 +17,7 @@ from fmctd_dist.config import Config
 from fmctd_dist.families.maze.pointmaze import PointMaze
 from fmctd_dist.families.maze.robots import ControllerFactory, controller_factory
 from fmctd_dist.evaluation.plan_tally import PlanTally
-from fmctd_dist.planners.base import Planner, plan_seed
+from fmctd_dist.planners.base import Planner
 
 
 def run_episode(cfg: Config, env: PointMaze, planner: Planner, task: int, seed: int,
@@ -28,21 +27,16 @@ def run_episode(cfg: Config, env: PointMaze, planner: Planner, task: int, seed: 
     ``make_controller`` (plan -> controller): pass one built once per env (the ant's loads a
     policy); default :func:`controller_factory` of ``cfg``.
     """
-    limit = cfg.eval.episode_time_limit if time_limit_s is None else time_limit_s
     make_controller = make_controller or controller_factory(cfg)
-    t_episode = time.perf_counter()
+    tally = PlanTally.episode(cfg, task, seed, time_limit_s)
     reset = env.reset(task, seed)
     obs, goal = reset.obs, reset.goal
     pos = obs[:2]  # the planner's state: x, y (the ant's observation has 27 more features)
-    traj, first_plan = [pos], None
-    steps, success, timed_out = 0, False, False
-    tally = PlanTally()
+    traj = [pos]
+    steps, success = 0, False
     while steps < cfg.env.max_steps and not success:
-        out = planner.plan(pos, goal, plan_seed(cfg.seed, task, seed, tally.plans))
-        tally.add(out)
-        first_plan = out.waypoints if first_plan is None else first_plan
-        if out.timed_out or (limit and tally.plan_time_s > limit):
-            timed_out = True
+        out = tally.plan(planner, pos, goal)
+        if out is None:
             break
         ctrl = make_controller(out.waypoints)
         for _ in range(min(cfg.method.replan_every or cfg.env.max_steps, cfg.env.max_steps - steps)):
@@ -52,23 +46,11 @@ def run_episode(cfg: Config, env: PointMaze, planner: Planner, task: int, seed: 
             steps += 1
             if success:
                 break
-    return maze_row(cfg, task, seed, success, timed_out, steps, tally, t_episode, first_plan, traj)
+    return maze_row(tally, success, steps, tally.first, traj)
 
 
-def maze_row(cfg: Config, task: int, seed: int, success: bool, timed_out: bool, steps: int, tally: PlanTally,
-             t_episode: float, plan_xy: Any, traj: list) -> dict[str, Any]:
+def maze_row(tally: PlanTally, success: bool, steps: int, plan_xy: Any, traj: list) -> dict[str, Any]:
     """The row of an episode moving a point in the maze plane (point, ant, visual point): the same columns,
     so grids, tables, plots and reports read any of them. ``plan_xy``: the first plan's (x, y) [N, 2]."""
-    return {
-        "method": cfg.method.name,
-        "env": cfg.env.name,
-        "task": int(task),
-        "seed": int(seed),
-        "success": bool(success and not timed_out),
-        "timed_out": timed_out,
-        "env_steps": steps,
-        **tally.columns(),
-        "episode_time_s": time.perf_counter() - t_episode,
-        "plan_xy": np.asarray(plan_xy, np.float32).reshape(-1).tolist(),
-        "traj_xy": np.asarray(traj, np.float32).reshape(-1).tolist(),
-    }
+    return {**tally.row(success, steps), "plan_xy": np.asarray(plan_xy, np.float32).reshape(-1).tolist(),
+            "traj_xy": np.asarray(traj, np.float32).reshape(-1).tolist()}

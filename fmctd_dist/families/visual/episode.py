@@ -15,7 +15,6 @@ grids, tables and reports read either.
 
 from __future__ import annotations
 
-import time
 from typing import Any, Callable
 
 import numpy as np
@@ -24,7 +23,7 @@ from fmctd_dist.config import Config
 from fmctd_dist.families.visual.latent_path import InverseDynamics, LatentPathController
 from fmctd_dist.families.maze.episode import maze_row
 from fmctd_dist.evaluation.plan_tally import PlanTally
-from fmctd_dist.planners.base import Planner, plan_seed
+from fmctd_dist.planners.base import Planner
 from fmctd_dist.families.visual.frames_xy import PlanFrames
 
 Encoder = Callable[[np.ndarray], np.ndarray]  # uint8 [N, 64, 64, 3] -> mu [N, D]
@@ -33,23 +32,17 @@ Encoder = Callable[[np.ndarray], np.ndarray]  # uint8 [N, 64, 64, 3] -> mu [N, D
 def run_visual_episode(cfg: Config, env: Any, encode: Encoder, invdyn: InverseDynamics, frames: PlanFrames,
                        planner: Planner, task: int, seed: int, time_limit_s: float | None = None) -> dict[str, Any]:
     """Run one episode of ``env`` (a :class:`~fmctd_dist.families.visual.env.VisualPointMaze`); its row."""
-    limit = cfg.eval.episode_time_limit if time_limit_s is None else time_limit_s
-    t_episode = time.perf_counter()
+    tally = PlanTally.episode(cfg, task, seed, time_limit_s)
     reset = env.reset(task, seed)
     pos = reset.obs[:2]
     z = encode(env.image()[None])[0]
     z_goal = encode(env.goal_image()[None])[0]
     z_prev = z
-    traj, first_plan = [pos], None
-    steps, success, timed_out = 0, False, False
-    tally = PlanTally()
+    traj = [pos]
+    steps, success = 0, False
     while steps < cfg.env.max_steps and not success:
-        out = planner.plan(frames.of_latents(z), frames.of_latents(z_goal), plan_seed(cfg.seed, task, seed,
-                                                                                     tally.plans))
-        tally.add(out)
-        first_plan = out.waypoints if first_plan is None else first_plan
-        if out.timed_out or (limit and tally.plan_time_s > limit):
-            timed_out = True
+        out = tally.plan(planner, frames.of_latents(z), frames.of_latents(z_goal))
+        if out is None:
             break
         ctrl = LatentPathController(frames.latents(out.waypoints), cfg.jump, invdyn, z)
         for _ in range(min(cfg.method.replan_every or cfg.env.max_steps, cfg.env.max_steps - steps)):
@@ -59,6 +52,6 @@ def run_visual_episode(cfg: Config, env: Any, encode: Encoder, invdyn: InverseDy
             steps += 1
             if success:
                 break
-    plan_xy = frames(np.asarray(first_plan)) if first_plan is not None else np.zeros((0, 2))
-    return {**maze_row(cfg, task, seed, success, timed_out, steps, tally, t_episode, plan_xy, traj),
+    plan_xy = frames(np.asarray(tally.first)) if tally.first is not None else np.zeros((0, 2))
+    return {**maze_row(tally, success, steps, plan_xy, traj),
             "goal_xy_estimate_error": float(np.linalg.norm(frames.estimator(z_goal) - env.goal))}

@@ -17,7 +17,6 @@ from typing import Any
 
 import numpy as np
 import torch
-from tqdm import tqdm
 
 from fmctd_dist.artifacts import MANIFEST_FILE
 from fmctd_dist.config import Config, git_sha, resolve_path
@@ -29,15 +28,11 @@ from fmctd_dist.families.visual.latents import load_latents, vae_dir
 from fmctd_dist.families.visual.load import LoadedVAE, load_vae
 from fmctd_dist.families.visual.mlp import LatentMLP, build_mlp, triples
 from fmctd_dist.families.visual.vae import encode_frames
-from fmctd_dist.resume import Clock, check_resume, load_train_state, save_train_state
-
+from fmctd_dist.resume import TrainRun, check_resume, load_part_states, load_train_state, part_states, \
+    save_train_state, stream_rng
 BATCH_STREAM, VAL_STREAM = 41, 42
 POINT_STEP = 0.2  # the point maze moves 0.2 * action per step in open floor (its data: x_{t+1} - x_t = 0.2 a_t)
 RESUME_FIELDS = ("hidden", "batch_size", "seed")
-
-
-def _rng(seed: int, stream: int) -> np.random.Generator:
-    return np.random.Generator(np.random.PCG64(np.random.SeedSequence([seed, stream])))
 
 
 def _sample(mu: np.ndarray, std: np.ndarray, rng: np.random.Generator) -> np.ndarray:
@@ -104,15 +99,13 @@ def train_head(cfg: Config, pcfg: PartsConfig, part: str, progress: bool = True)
     net = build_mlp(window * vae.latent_dim, 2, h.hidden, h.seed)
     net.set_normaliser(d["mu"], d["y"])
     opt = torch.optim.Adam(net.parameters(), lr=h.lr)
-    rng = _rng(h.seed, BATCH_STREAM)
-    val_z = _sample(d["val_mu"], d["val_std"], _rng(h.seed, VAL_STREAM))
-    step, wall = 0, 0.0
-    hist: dict[str, list[list[float]]] = {"train": [], "val": []}
+    rng = stream_rng(h.seed, BATCH_STREAM)
+    val_z = _sample(d["val_mu"], d["val_std"], stream_rng(h.seed, VAL_STREAM))
     if state is not None:
-        net.load_state_dict(state["net"])
-        opt.load_state_dict(state["opt"])
-        rng.bit_generator.state = state["rng"]
-        step, wall, hist = int(state["step"]), float(state["wall_time_s"]), state["history"]
+        load_part_states(state, net=net, opt=opt, rng=rng)
+    run = TrainRun(f"{part} {cfg.env.name}", h.max_steps, state or {"history": {"train": [], "val": []}},
+                   h.time_budget_s, progress=progress)
+    hist = run.history
     refs: dict[str, Any] = {}
     if part == "invdyn":
         y = d["val_y"].astype(np.float64)
@@ -132,43 +125,27 @@ def train_head(cfg: Config, pcfg: PartsConfig, part: str, progress: bool = True)
         save_part(out, part, net, {
             "env": cfg.env.name, "latent_dim": vae.latent_dim, "window": window, "hidden": list(h.hidden),
             "vae": {"path": str(vae.path), "digest": vae.digest}, "config": {part: pcfg.to_dict()[part]},
-            "data": d["record"], "steps": step, "wall_time_s": round(wall, 2), "metrics": final,
+            "data": d["record"], "steps": run.step, "wall_time_s": round(run.clock.wall_s, 2), "metrics": final,
             "val_history": hist["val"], "git_sha": git_sha(),
             "input_layout": "z [..., latent_dim] (mu or a sample) -> world (x, y)" if part == "estimator" else
             "(z_{t-1}, z_t, z_{t+1}) concatenated [..., 3 latent_dim] -> a_t [..., 2] (point maze action, [-1, 1])"})
-        save_train_state(out, {"net": net.state_dict(), "opt": opt.state_dict(), "rng": rng.bit_generator.state,
-                               "step": step, "wall_time_s": wall, "history": hist, "config": pcfg.to_dict()[part],
+        save_train_state(out, {**part_states(net=net, opt=opt, rng=rng), **run.state(), "config": pcfg.to_dict()[part],
                                "vae_digest": vae.digest})
 
-    bar = tqdm(total=h.max_steps, initial=step, disable=not progress, desc=f"{part} {cfg.env.name}", dynamic_ncols=True)
-    clock = Clock(wall)
-    n_log, loss_sum = 0, 0.0
-    stop = step >= h.max_steps or clock.over(h.time_budget_s)
     final = metrics()
-    while not stop:
+    while not run.last:
         i = rng.integers(0, len(d["y"]), size=h.batch_size)
         x = torch.from_numpy(_sample(d["mu"][i], d["std"][i], rng))
         loss = (net.normalised(x) - (yt[i] - net.out_mean) / net.out_std).square().mean()
         opt.zero_grad(set_to_none=True)
         loss.backward()
         opt.step()
-        step += 1
-        n_log, loss_sum = n_log + 1, loss_sum + float(loss.detach())
-        stop = step >= h.max_steps or clock.over(h.time_budget_s)
-        if step % h.log_every == 0 or stop:
-            hist["train"].append([step, loss_sum / n_log])
-            post = {"loss": f"{loss_sum / n_log:.4f}"}
-            if hist["val"]:
-                post["val"] = f"{hist['val'][-1][1]:.4f}"
-            bar.set_postfix(post, refresh=False)
-            bar.update(n_log)
-            n_log, loss_sum = 0, 0.0
-        if step % h.val_every == 0 or stop:
+        run.tick(float(loss.detach()))
+        if run.due(h.log_every):
+            run.log()
+        if run.due(h.val_every):
             final = metrics()
-            hist["val"].append([step, final["val_rmse"] if part == "estimator" else final["val_mse"]])
-        if step % h.ckpt_every == 0 or stop:
-            clock.lap()
-            wall = clock.wall_s
-            save(final)
-    bar.close()
-    return {"out_dir": str(out), "step": step, "wall_time_s": wall, **final}
+            hist["val"].append([run.step, final["val_rmse"] if part == "estimator" else final["val_mse"]])
+        run.checkpoint(h.ckpt_every, lambda: save(final))
+    run.close()
+    return {"out_dir": str(out), "step": run.step, "wall_time_s": run.clock.wall_s, **final}

@@ -11,12 +11,10 @@ runs together, so a CPU budget is a config value, not a killed process.
 
 from __future__ import annotations
 
-import time
 from typing import Any
 
 import numpy as np
 import torch
-from tqdm import tqdm
 
 from fmctd_dist.artifacts import MANIFEST_FILE
 from fmctd_dist.config import Config, git_sha
@@ -25,8 +23,8 @@ from fmctd_dist.families.visual.checkpoint import read_part_manifest, save_part
 from fmctd_dist.families.visual.config import PartsConfig, part_dir
 from fmctd_dist.families.visual.frames import FrameSet, load_frame_set
 from fmctd_dist.families.visual.vae import ConvVAE, encode_frames, psnr, recon_mse, vae_loss
-from fmctd_dist.resume import Clock, check_resume, load_train_state, save_train_state
-
+from fmctd_dist.resume import Clock, TrainRun, check_resume, load_part_states, load_train_state, part_states, \
+    save_train_state, stream_rng
 BATCH_STREAM, NOISE_SEED_OFFSET = 31, 1_000_003
 RESUME_FIELDS = ("latent_dim", "channels", "kl_weight", "batch_size", "seed")
 
@@ -66,18 +64,15 @@ def train_vae(cfg: Config, pcfg: PartsConfig, progress: bool = True, frames: Fra
 
     net = build_vae(v.latent_dim, v.channels, v.seed)
     opt = torch.optim.Adam(net.parameters(), lr=v.lr)
-    rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence([v.seed, BATCH_STREAM])))
+    rng = stream_rng(v.seed, BATCH_STREAM)
     gen = torch.Generator().manual_seed(v.seed + NOISE_SEED_OFFSET)
-    step, wall = 0, 0.0
-    hist: dict[str, list[list[float]]] = {"train": [], "val": []}  # [step, per-pixel mse] (train: + kl)
     if state is not None:
-        net.load_state_dict(state["net"])
-        opt.load_state_dict(state["opt"])
+        load_part_states(state, net=net, opt=opt, rng=rng, gen=gen)
         for group in opt.param_groups:
             group["lr"] = v.lr
-        rng.bit_generator.state = state["rng"]
-        gen.set_state(state["gen"])
-        step, wall, hist = int(state["step"]), float(state["wall_time_s"]), state["history"]
+    run = TrainRun(f"vae {cfg.env.name}", v.max_steps, state or {"history": {"train": [], "val": []}},
+                   v.time_budget_s, progress=progress, names=("mse", "kl"))  # [step, per-pixel mse] (train: + kl)
+    hist = run.history
     probe: dict[str, float] = {}
 
     def metrics() -> dict[str, Any]:
@@ -89,51 +84,33 @@ def train_vae(cfg: Config, pcfg: PartsConfig, progress: bool = True, frames: Fra
     def save() -> None:
         save_part(out, "vae", net, {
             "env": cfg.env.name, "latent_dim": v.latent_dim, "channels": list(v.channels), "config": {"vae": {
-                **pcfg.to_dict()["vae"]}}, "frames": fs.record(), "steps": step, "wall_time_s": round(wall, 2),
+                **pcfg.to_dict()["vae"]}}, "frames": fs.record(), "steps": run.step,
+            "wall_time_s": round(run.clock.wall_s, 2),
             "metrics": metrics(), "val_history": hist["val"], "git_sha": git_sha(),
             "input_layout": "encode(uint8 [B, 64, 64, 3] chase-camera frames) -> mu, logvar [B, latent_dim]; "
                             "decode(z) -> [B, 3, 64, 64] in (0, 1)"})
-        save_train_state(out, {"net": net.state_dict(), "opt": opt.state_dict(), "rng": rng.bit_generator.state,
-                               "gen": gen.get_state(), "step": step, "wall_time_s": wall, "history": hist,
+        save_train_state(out, {**part_states(net=net, opt=opt, rng=rng, gen=gen), **run.state(),
                                "config": pcfg.to_dict()["vae"], "env": cfg.env.name, "frames_sha256": fs.sha256})
 
-    bar = tqdm(total=v.max_steps, initial=step, disable=not progress, desc=f"vae {cfg.env.name}", dynamic_ncols=True)
-    clock = Clock(wall)
-    t_log = clock.started
-    n_log, mse_sum, kl_sum = 0, 0.0, 0.0
     images = torch.from_numpy(fs.train_images)
     net.train()
-    stop = step >= v.max_steps or clock.over(v.time_budget_s)
-    while not stop:
+    while not run.last:
         idx = rng.integers(0, len(images), size=v.batch_size)
         loss, mse, kl = vae_loss(net, images[idx], v.kl_weight, gen)
         opt.zero_grad(set_to_none=True)
         loss.backward()
         opt.step()
-        step += 1
-        n_log, mse_sum, kl_sum = n_log + 1, mse_sum + float(mse.detach()), kl_sum + float(kl.detach())
-        stop = step >= v.max_steps or clock.over(v.time_budget_s)
-        if step % v.log_every == 0 or stop:
-            now = time.perf_counter()
-            hist["train"].append([step, mse_sum / n_log, kl_sum / n_log])
-            post = {"mse": f"{mse_sum / n_log:.5f}", "kl": f"{kl_sum / n_log:.0f}",
-                    "s/step": f"{(now - t_log) / n_log:.2f}"}
-            if hist["val"]:
-                post["val_psnr"] = f"{psnr(hist['val'][-1][1]):.1f}"
-            bar.set_postfix(post, refresh=False)
-            bar.update(n_log)
-            n_log, mse_sum, kl_sum, t_log = 0, 0.0, 0.0, now
-        if step % v.val_every == 0 or stop:
-            hist["val"].append([step, recon_mse(net, fs.val_images)])
+        run.tick(float(mse.detach()), float(kl.detach()))
+        if run.due(v.log_every):
+            run.log()
+        if run.due(v.val_every):
+            hist["val"].append([run.step, recon_mse(net, fs.val_images)])
             net.train()
-        if stop:
+        if run.last:
             z_tr, _ = encode_frames(net, fs.train_images)
             z_va, _ = encode_frames(net, fs.val_images)
             probe["val_linear_xy_rmse"] = linear_probe(z_tr, fs.train_xy, z_va, fs.val_xy)
             net.train()
-        if step % v.ckpt_every == 0 or stop:
-            clock.lap()
-            wall = clock.wall_s
-            save()
-    bar.close()
-    return {"out_dir": str(out), "step": step, "wall_time_s": wall, **metrics()}
+        run.checkpoint(v.ckpt_every, save)
+    run.close()
+    return {"out_dir": str(out), "step": run.step, "wall_time_s": run.clock.wall_s, **metrics()}

@@ -10,12 +10,10 @@ is bitwise the uninterrupted one, otherwise it continues on the newest transitio
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from tqdm import tqdm
 
 from fmctd_dist.families.maze.expert.config import AntExpertConfig
 from fmctd_dist.config import git_sha
@@ -26,8 +24,8 @@ from fmctd_dist.families.maze.expert.expert import read_expert_manifest, save_ex
 from fmctd_dist.families.maze.expert.sac import SAC, ReplayBuffer
 from fmctd_dist.device import set_threads
 from fmctd_dist.errors import CheckpointError
-from fmctd_dist.resume import Clock, check_resume, load_train_state, save_train_state
-
+from fmctd_dist.resume import TrainRun, check_resume, load_part_states, load_train_state, part_states, \
+    save_train_state, stream_rng
 RNG_STREAM = 2  # SeedSequence([seed, RNG_STREAM]): random warm-up actions and replay indices
 RECENT = 20  # episodes in the progress bar's running means
 # Fields a resumed run must share with the saved one (everything else may change between runs).
@@ -44,20 +42,14 @@ def train_expert(cfg: AntExpertConfig, out_dir: str | Path | None = None, progre
     eval_env = make_eval_env(cfg.env, cfg.eval)
     agent = SAC(OBS_DIM, ACT_DIM, cfg.sac, seed=seed)
     buffer = ReplayBuffer(cfg.sac.buffer_size, OBS_DIM, ACT_DIM)
-    rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence([seed, RNG_STREAM])))
-    step, wall, resumed_from = 0, 0.0, None
-    hist: dict[str, Any] = {"episodes": [], "eval": [], "updates": []}  # [step, return, length, speed] / ...
+    rng = stream_rng(seed, RNG_STREAM)
     ep = {"ret": 0.0, "len": 0, "speed": 0.0}
 
     state = load_train_state(out_dir)
     if state is not None:
         check_resume(out_dir, "ant expert", "expert.out", state["config"], cfg.to_dict(), RESUME_FIELDS)
-        agent.load_state_dict(state["agent"])
-        buffer.load_state_dict(state["buffer"])
-        rng.bit_generator.state = state["numpy_rng"]
-        obs = env.set_state(state["env"])
-        step, wall, hist, ep = int(state["step"]), float(state["wall_time_s"]), state["history"], state["episode"]
-        resumed_from = step
+        load_part_states(state, agent=agent, buffer=buffer, numpy_rng=rng)
+        obs, ep = env.set_state(state["env"]), state["episode"]
     elif (out_dir / MANIFEST_FILE).exists():
         manifest = read_expert_manifest(out_dir)
         if int(manifest["env_steps"]) >= ec.max_steps:  # a finished (e.g. shipped) expert: nothing to do
@@ -70,32 +62,30 @@ def train_expert(cfg: AntExpertConfig, out_dir: str | Path | None = None, progre
         )
     else:
         obs = env.reset()
+    run = TrainRun("ant expert", ec.max_steps, state or {"history": {"episodes": [], "eval": [], "updates": []}},
+                   progress=progress, names=())  # [step, return, length, speed] / ...
+    hist, resumed_from = run.history, None if state is None else run.step
 
     def evaluate() -> None:
         agent.actor.eval()
         m = evaluate_directions(lambda o: agent.act(o, deterministic=True), cfg.env, cfg.eval, env=eval_env)
         agent.actor.train()
-        hist["eval"].append({"step": step, **m})
+        hist["eval"].append({"step": run.step, **m})
 
     def save() -> None:
         last_eval = hist["eval"][-1] if hist["eval"] else None
         save_expert(out_dir, agent.actor, {
-            "config": cfg.to_dict(), "env_steps": step, "updates": agent.updates, "wall_time_s": wall,
+            "config": cfg.to_dict(), "env_steps": run.step, "updates": agent.updates, "wall_time_s": run.clock.wall_s,
             "git_sha": git_sha(), "seed": seed, "metrics": {"eval": last_eval, **_recent(hist)},
             "eval_history": hist["eval"], "ogbench_env": "ogbench.online_locomotion.ant.AntEnv (open arena)",
         })
-        save_train_state(out_dir, {
-            "agent": agent.state_dict(), "buffer": buffer.state_dict(ec.buffer_save), "env": env.get_state(),
-            "numpy_rng": rng.bit_generator.state, "step": step, "wall_time_s": wall, "history": hist,
-            "episode": ep, "config": cfg.to_dict(),
-        })
+        save_train_state(out_dir, {**part_states(agent=agent, numpy_rng=rng), **run.state(),
+                                   "buffer": buffer.state_dict(ec.buffer_save), "env": env.get_state(), "episode": ep,
+                                   "config": cfg.to_dict()})
 
-    bar = tqdm(total=ec.max_steps, initial=step, disable=not progress, desc="ant expert", dynamic_ncols=True)
-    clock = Clock(wall)
-    t_log = clock.started
-    n_log, last_update = 0, None
-    while step < ec.max_steps:
-        if step < ec.start_steps:
+    last_update = None
+    while not run.last:
+        if run.step < ec.start_steps:
             action = rng.uniform(-1.0, 1.0, ACT_DIM)
         else:
             action = agent.act(obs)
@@ -106,31 +96,24 @@ def train_expert(cfg: AntExpertConfig, out_dir: str | Path | None = None, progre
         ep["len"] += 1
         ep["speed"] += info["speed"]
         if terminated or truncated:
-            hist["episodes"].append([step + 1, ep["ret"], ep["len"], ep["speed"] / ep["len"]])
+            hist["episodes"].append([run.step + 1, ep["ret"], ep["len"], ep["speed"] / ep["len"]])
             ep = {"ret": 0.0, "len": 0, "speed": 0.0}
             obs = env.reset()
-        step += 1
-        n_log += 1
-        if step > ec.start_steps:  # one update per step from the first policy step on
+        run.tick()
+        if run.step > ec.start_steps:  # one update per step from the first policy step on
             for _ in range(ec.updates_per_step):
                 last_update = agent.update(buffer.sample(rng, cfg.sac.batch_size))
-        if step % ec.log_every == 0 or step == ec.max_steps:
-            now = time.perf_counter()
+        if run.due(ec.log_every):
             if last_update is not None:
-                hist["updates"].append([step, last_update["critic_loss"], last_update["q"], last_update["alpha"]])
-            bar.set_postfix(_postfix(hist, last_update, n_log / (now - t_log)), refresh=False)
-            bar.update(n_log)
-            n_log, t_log = 0, now
-        if (cfg.eval.every > 0 and step % cfg.eval.every == 0) or step == ec.max_steps:
+                hist["updates"].append([run.step, last_update["critic_loss"], last_update["q"], last_update["alpha"]])
+            run.log(**_shown(hist, last_update))
+        if run.due(cfg.eval.every):
             evaluate()
-        if step % ec.ckpt_every == 0 or step == ec.max_steps:
-            clock.lap()
-            wall = clock.wall_s
-            save()
-    bar.close()
+        run.checkpoint(ec.ckpt_every, save)
+    run.close()
     env.close()
     eval_env.close()
-    return _summary(step, wall, hist, out_dir, resumed_from)
+    return _summary(run.step, run.clock.wall_s, hist, out_dir, resumed_from)
 
 
 def _recent(hist: dict[str, Any]) -> dict[str, Any]:
@@ -142,16 +125,12 @@ def _recent(hist: dict[str, Any]) -> dict[str, Any]:
             "recent_speed": float(a[:, 3].mean())}
 
 
-def _postfix(hist: dict[str, Any], upd: dict[str, float] | None, steps_s: float) -> dict[str, str]:
+def _shown(hist: dict[str, Any], upd: dict[str, float] | None) -> dict[str, float | None]:
+    """The progress bar's running means, last success rate and entropy temperature (None: not yet)."""
     r = _recent(hist)
-    out = {"ret": "-" if r["recent_return"] is None else f"{r['recent_return']:.0f}",
-           "v": "-" if r["recent_speed"] is None else f"{r['recent_speed']:.2f}"}
-    if hist["eval"]:
-        out["succ"] = f"{hist['eval'][-1]['success']:.2f}"
-    if upd is not None:
-        out["alpha"] = f"{upd['alpha']:.3f}"
-    out["steps_s"] = f"{steps_s:.0f}"
-    return out
+    succ = hist["eval"][-1]["success"] if hist["eval"] else None
+    alpha = None if upd is None else upd["alpha"]
+    return {"ret": r["recent_return"], "v": r["recent_speed"], "succ": succ, "alpha": alpha}
 
 
 def _summary(step: int, wall: float, hist: dict[str, Any], out_dir: Path, resumed_from: int | None) -> dict[str, Any]:
