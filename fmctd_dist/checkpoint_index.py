@@ -45,9 +45,6 @@ PURPOSES: dict[str, str] = {
                                      "the large maze's boundary-loss latent lineage from it (val 0.0302 against the "
                                      "default `visual-pointmaze-large-h5`'s 0.0457; no shipped latent model descends "
                                      "from it); tests/test_gpu_train.py",
-    "pointmaze-large-h1-s41": "docs/notebook/training-campaign.md (\"Session 41\"): the candidate to replace the "
-                              "default dense `pointmaze-large-h1` (5,569 more CPU-trained steps at batch 128, guided "
-                              "valid plans 31 -> 41%), waiting for its MCTD and P-MCTD 5 x 10 lines",
 }
 
 FAMILY_ORDER = ("pointmaze", "antmaze", "cube", "visual-pointmaze")
