@@ -27,7 +27,7 @@ def state(*cubes) -> np.ndarray:
 
 
 def score(rule, plans, start, goal, obj=0, n=2):
-    acts = object_actions([obj], n, scales=[1.0])
+    acts = object_actions([obj], n, 3, [1.0])
     acts = acts.take(np.zeros(plans.shape[0], np.int64))
     prepared = rule.prepare(plans, start, acts)
     return (*rule.values(prepared, start, goal, acts), prepared)
@@ -188,7 +188,7 @@ def test_batch_scores_like_single_plans():
     ramp = np.minimum(np.arange(1, 10) / 5, 1.0)[:, None]
     plans[::3, :, :3] = start[:3] + (goal[:3] - start[:3]) * ramp  # some plans slide cube 0 onto its goal
     objs = np.where(np.arange(16) % 3 == 0, 0, np.arange(16) % 2)
-    acts = object_actions([0, 1], 2, scales=[1.0]).take(objs)
+    acts = object_actions([0, 1], 2, 3, [1.0]).take(objs)
     for rule in (CubeValue(replanning=False), CubeValue(replanning=True)):
         prepared = rule.prepare(plans, start, acts)
         v, s, t = rule.values(prepared, start, goal, acts)
@@ -202,16 +202,16 @@ def test_batch_scores_like_single_plans():
 # ---------------------------------------------------------------- action sets
 
 def test_object_actions_are_cube_scale_pairs():
-    acts = object_actions([0, 2], 3)
+    acts = object_actions([0, 2], 3, 3, (1.0, 2.0, 4.0))
     assert acts.size == 6
     assert acts.obj.tolist() == [0, 0, 0, 2, 2, 2] and acts.scale.tolist() == [1, 2, 4, 1, 2, 4]
     np.testing.assert_array_equal(acts.mask[0], [1, 1, 1, 0, 0, 0, 0, 0, 0])
     np.testing.assert_array_equal(acts.mask[5], [0, 0, 0, 0, 0, 0, 1, 1, 1])
-    assert [object_actions(list(range(n)), 3).size for n in (1, 2, 3)] == [3, 6, 9]
+    assert [object_actions(list(range(n)), 3, 3, (1.0, 2.0, 4.0)).size for n in (1, 2, 3)] == [3, 6, 9]
     with pytest.raises(ValueError, match="distinct"):
-        object_actions([0, 0], 2)
+        object_actions([0, 0], 2, 3, [1.0])
     with pytest.raises(ValueError, match="distinct"):
-        object_actions([3], 3)
+        object_actions([3], 3, 3, [1.0])
 
 
 def test_scale_actions_are_the_old_guidance_scales():

@@ -24,6 +24,7 @@ SEED = 11
 Z = 0.2
 START = np.array([0.0, 0.0, Z, 0.0, 3.0, Z])  # cube 0, cube 1 (obs units)
 GOAL = np.array([4.0, 0.0, Z, 0.0, 0.0, Z])  # cube 1's goal is cube 0's start
+SCALES = (1.0, 2.0, 4.0)  # per unsolved cube (configs/env/cube-*.yaml env.object_scales)
 FRAME_STACK = 2  # 10 plan tokens x 2 = 20 frames, 19 scored
 
 
@@ -34,7 +35,7 @@ def codec() -> PlanCodec:
 def run(denoiser=None, seed=SEED, rule=None, **overrides):
     params = SearchParams(**{"early_stop": False, "warp_threshold": 1.0, **overrides})
     rule = rule or CubeValue(warp_threshold=1.0, replanning=True)
-    acts = object_actions(rule.unsolved(START, GOAL), 2)
+    acts = object_actions(rule.unsolved(START, GOAL), 2, 3, SCALES)
     fd = denoiser or FakeDenoiser(pos_dim=6)
     res = search(fd, make_schedule(), codec(), START, GOAL, params, seed, actions=acts, value=rule)
     return res, fd, acts
@@ -152,4 +153,4 @@ def test_cube_search_is_deterministic_and_seeded():
 def test_masks_must_match_the_state():
     with pytest.raises(ValueError, match="state dims"):
         search(FakeDenoiser(pos_dim=6), make_schedule(), codec(), START, GOAL, SearchParams(budget=4), 0,
-               actions=object_actions([0], 3))
+               actions=object_actions([0], 3, 3, SCALES))

@@ -86,7 +86,8 @@ def goal_reward(x0: torch.Tensor, start: torch.Tensor, goal: torch.Tensor,
 
     ``guide_map`` (a module with ``in_dim``: frame states [..., in_dim] -> [..., d']): distances
     are measured on mapped frames, start and goal, e.g. the visual maze's position estimator
-    reading (x, y) off a latent (``visual/guide.py``); the gradient then flows through the map.
+    reading (x, y) off a latent (``visual/guide.py``); the gradient then flows through the map. A map with a
+    ``penalty`` (mapped plan frames [B, F', d'] -> [B]; a maze's walls, ``maze/wall_guide.py``) has it subtracted.
 
     ``boundary_weight`` (diffusion.boundary_guidance; 0 = the authors' reward, bit for bit) adds
     -w * mean over token boundaries of ||(p_first - p_last) - (p_last - p_before)||: the step across
@@ -120,6 +121,9 @@ def goal_reward(x0: torch.Tensor, start: torch.Tensor, goal: torch.Tensor,
     reward = -(w * torch.tanh(dist / 2)).mean(dim=1)
     if boundary_weight and t > 1 and fs >= 2:
         reward = reward - boundary_weight * boundary_kink(frames, fs)
+    penalty = getattr(guide_map, "penalty", None)
+    if penalty is not None:
+        reward = reward - penalty(frames[:, fs:])
     return reward
 
 

@@ -15,7 +15,6 @@ from typing import Sequence
 import numpy as np
 
 ALL = -1  # Actions.obj of an action that guides every state dim (no object chosen)
-CUBE_SCALES = (1.0, 2.0, 4.0)  # docs/reference.md §13: scales per unsolved cube
 
 
 @dataclass(frozen=True)
@@ -53,14 +52,12 @@ def scale_actions(scales: Sequence[float]) -> Actions:
     return Actions(s, np.full(s.shape[0], ALL, np.int32), None)
 
 
-def object_actions(
-    objects: Sequence[int], num_objects: int, obj_dim: int = 3, scales: Sequence[float] = CUBE_SCALES
-) -> Actions:
+def object_actions(objects: Sequence[int], num_objects: int, obj_dim: int, scales: Sequence[float]) -> Actions:
     """(object, scale) pairs, object-major: slot = i * len(scales) + k guides ``objects[i]`` at ``scales[k]``.
 
     The frame state is ``num_objects`` blocks of ``obj_dim`` numbers (cubes: xyz); the mask of an
     action is 1 on its object's block only, so the goal term sees that object's distance alone.
-    ``objects`` are the not-yet-solved ones, chosen by the caller (e.g. :func:`cube_value.unsolved`).
+    ``objects`` are the not-yet-solved ones, chosen by the caller (a family's value rule).
     """
     objs = [int(o) for o in objects]
     if not objs or not scales:

@@ -51,6 +51,7 @@ from fmctd_dist.denoiser.protocol import DenoiseBatch
 from fmctd_dist.diffusion.checkpoint import load_checkpoint, normaliser_from_manifest, read_manifest
 from fmctd_dist.diffusion.schedule import PyramidSchedule
 from fmctd_dist.families.cube.data import load_cube_dataset
+from fmctd_dist.families import guide_map
 from fmctd_dist.families.cube.value import LEVEL, TABLE_Z, CubeValue
 from fmctd_dist.families.maze.geometry import maze_geometry
 from fmctd_dist.planners.fixed import uniform_levels
@@ -112,7 +113,9 @@ def plan_quality(ckpt: Path, cfg: Config | None = None, samples_per_task: int = 
     model, manifest = load_checkpoint(ckpt, cfg)
     cfg = cfg or config_from_dict(manifest["config"])
     codec = PlanCodec(normaliser_from_manifest(manifest), cfg.model.frame_stack)
-    denoiser = LocalDenoiser(model, cfg.diffusion, "cpu", micro_batch=micro_batch)
+    guide = guide_map(cfg.env.name)  # the family's guide map (method.wall_guidance's wall term), else None
+    denoiser = LocalDenoiser(model, cfg.diffusion, "cpu", micro_batch=micro_batch,
+                             guide_map=None if guide is None else guide(cfg, manifest))
     geo = maze_geometry(cfg.env.name)
     starts = np.repeat(np.stack([t.init_xy for t in geo.tasks]), samples_per_task, 0)
     goals = np.repeat(np.stack([t.goal_xy for t in geo.tasks]), samples_per_task, 0)

@@ -45,6 +45,16 @@ def plan_rules(cfg: Config) -> MazeRules:
                      MazeValue(float(m.warp_threshold), float(m.goal_radius), crosses_wall))
 
 
+def guide_map(cfg: Config, manifest: dict[str, Any]):
+    """The denoiser's guide map: None (the paper's guidance), or with ``method.wall_guidance`` > 0 the wall
+    term (``maze/wall_guide.py``)."""
+    if cfg.method.wall_guidance <= 0:
+        return None
+    from fmctd_dist.families.maze.wall_guide import wall_guide
+
+    return wall_guide(cfg.env.name, manifest, cfg.method.wall_guidance)
+
+
 def check_episodes(cfg: Config) -> str:
     from fmctd_dist.families.maze.robots import check_controller
 
