@@ -1,0 +1,90 @@
+"""Plan-level success on validation start/goal pairs of a maze (not its five evaluation tasks), per config.
+
+For choosing a planner setting without looking at the evaluation tasks (e.g. ``method.wall_guidance``): each
+config plans once from each of N random pairs of free cells (seeded; the tasks' own pairs are left out, both
+ways round; BFS distance at least half the tasks' shortest) and the plan counts as a success when it is valid
+(no step over ``method.warp_threshold``, no step through a wall) and comes within ``method.goal_radius`` of the
+goal. No robot runs: this scores what the search hands the controller.
+
+    python jobs/probes/validation_plans.py env=antmaze-large method=fast-mctd pairs=20 \
+        'settings=[method.wall_guidance=0, method.wall_guidance=0.3]'
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from fmctd_dist.cli import run
+from fmctd_dist.config import load_config
+from fmctd_dist.denoiser.local import LocalDenoiser
+from fmctd_dist.diffusion.checkpoint import normaliser_from_manifest, read_manifest
+from fmctd_dist.errors import ConfigError
+from fmctd_dist.families import guide_map, hooks_for
+from fmctd_dist.families.maze.geometry import MazeGeometry, maze_geometry
+from fmctd_dist.planners.base import plan_seed
+from fmctd_dist.planners.factory import make_planner
+
+
+def validation_pairs(geo: MazeGeometry, n: int, seed: int = 0) -> list[tuple[tuple[int, int], tuple[int, int]]]:
+    """n (start cell, goal cell) pairs: free cells, not an evaluation task either way round, and at least half
+    as far apart (BFS) as the closest task."""
+    tasks = {(t.init_ij, t.goal_ij) for t in geo.tasks} | {(t.goal_ij, t.init_ij) for t in geo.tasks}
+    near = min(int(geo.bfs(t.goal_ij)[t.init_ij]) for t in geo.tasks) // 2
+    cells = geo.free_cells()
+    rng = np.random.default_rng(seed)
+    out: list[tuple[tuple[int, int], tuple[int, int]]] = []
+    while len(out) < n:
+        a, b = (cells[i] for i in rng.choice(len(cells), 2, replace=False))
+        if (a, b) not in tasks and geo.bfs(b)[a] >= near:
+            out.append((a, b))
+    return out
+
+
+def plan_success(waypoints: np.ndarray, start: np.ndarray, goal: np.ndarray, jump: int, warp: float,
+                 radius: float, geo: MazeGeometry) -> tuple[bool, bool]:
+    """(valid, reaches) of one plan: its coarse path from the start has no warp and crosses no wall; a coarse
+    waypoint lies within ``radius`` of the goal."""
+    coarse = np.asarray(waypoints)[::jump, :2]
+    if len(coarse) == 0:
+        return False, False
+    path = np.concatenate([start[None], coarse])
+    valid = bool(np.linalg.norm(np.diff(path, axis=0), axis=-1).max() <= warp and geo.path_in_free(path))
+    return valid, bool((np.linalg.norm(coarse - goal, axis=-1) < radius).any())
+
+
+def main(argv: list[str]) -> int:
+    opts = {"env": "antmaze-large", "method": "fast-mctd", "pairs": "20", "seed": "0", "settings": "[]"}
+    for a in argv:
+        key, sep, value = a.partition("=")
+        if not sep or key not in opts:
+            raise ConfigError(f"validation_plans: unknown argument {a!r}; expected any of {', '.join(opts)}")
+        opts[key] = value
+    settings = [s.strip() for s in opts["settings"].strip("[]").split(",") if s.strip()] or [""]
+    geo = maze_geometry(opts["env"])
+    pairs = validation_pairs(geo, int(opts["pairs"]), int(opts["seed"]))
+    print(f"{opts['env']} {opts['method']}: {len(pairs)} validation pairs (seed {opts['seed']})", flush=True)
+    print("| setting | valid and reaching | valid | reaching | plan s (mean) |\n|---|---|---|---|---|")
+    for setting in settings:
+        cfg = load_config([f"env={opts['env']}", f"method={opts['method']}", "eval.threads=1"]
+                          + ([setting] if setting else []))
+        manifest = read_manifest(cfg.checkpoint_dir())
+        denoiser = LocalDenoiser.from_checkpoint(cfg.checkpoint_dir(), cfg, guide_map=guide_map(cfg.env.name))
+        planner = make_planner(cfg, denoiser, normaliser_from_manifest(manifest), hooks_for(cfg.env.name).plan_rules(cfg))
+        tally, seconds = [], 0.0
+        for k, (a, b) in enumerate(pairs):
+            start, goal = geo.cell_to_xy(a), geo.cell_to_xy(b)
+            t0 = time.perf_counter()
+            out = planner.plan(start, goal, plan_seed(cfg.seed, 1000 + k))
+            seconds += time.perf_counter() - t0
+            tally.append(plan_success(out.waypoints, start, goal, cfg.jump, cfg.method.warp_threshold,
+                                      cfg.method.goal_radius, geo))
+        v, r = np.array(tally).T
+        print(f"| {setting or 'default'} | {np.mean(v & r):.0%} ({int((v & r).sum())}/{len(pairs)}) | {v.mean():.0%} | "
+              f"{r.mean():.0%} | {seconds / len(pairs):.1f} |", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    run(main)
