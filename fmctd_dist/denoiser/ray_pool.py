@@ -105,7 +105,7 @@ class DenoiserActor:
         """What this actor sees: gpu_ids, cuda_device_count, device, torch_threads, niceness, pid, node."""
         if self._error is not None:
             raise self._error
-        return {**self._info, "pid": os.getpid(), "node_id": ray.get_runtime_context().get_node_id()}
+        return {**self._info, **where()}
 
     def denoise(self, batch: DenoiseBatch, micro_batch: int) -> DenoiseResult:
         """One segment: whole micro-batches of ``micro_batch`` jobs in job order (the caller cut and padded
@@ -302,8 +302,18 @@ class DenoiserPool:
         return RayDenoiser.from_config(self.actors, self.cfg)
 
     def shutdown(self) -> None:
-        for a in self.actors:
-            try:
-                ray.kill(a, no_restart=True)
-            except Exception:  # noqa: BLE001 - already gone
-                pass
+        kill_quietly(self.actors)
+
+
+def kill_quietly(actors: list) -> None:
+    """Kill every actor of ``actors`` that is still alive."""
+    for a in actors:
+        try:
+            ray.kill(a, no_restart=True)
+        except Exception:  # noqa: BLE001 - already gone
+            pass
+
+
+def where() -> dict[str, Any]:
+    """Where this process runs: pid and Ray node id (what a fault test kills)."""
+    return {"pid": os.getpid(), "node_id": ray.get_runtime_context().get_node_id()}

@@ -21,6 +21,7 @@ from fmctd_dist.artifacts import (
     MANIFEST_FILE, MODEL_FILE, Types, load_weights, read_weights_manifest, save_weights, type_error, verify_weights,
 )
 from fmctd_dist.config import REPO_ROOT, Config, ModelConfig, resolve_path
+from fmctd_dist.config.repo import git
 from fmctd_dist.tokens import Normaliser
 from fmctd_dist.diffusion.model import DFTransformer
 from fmctd_dist.diffusion.models import build_model, diffusion_config_from_dict, model_config_from_dict
@@ -69,14 +70,7 @@ def _fresh_dir(cfg: Config) -> Path:
 
 def _tracked(path: Path) -> bool:
     """True when ``path`` is a checkpoint shipped in git (then `git checkout` restores it)."""
-    import subprocess
-
-    try:
-        out = subprocess.run(["git", "ls-files", "--error-unmatch", str(path / MODEL_FILE), str(path / MANIFEST_FILE)],
-                             cwd=REPO_ROOT, capture_output=True, text=True, timeout=10)
-        return out.returncode == 0
-    except (OSError, subprocess.SubprocessError):
-        return False
+    return git("ls-files", "--error-unmatch", str(path / MODEL_FILE), str(path / MANIFEST_FILE)) is not None
 
 
 def _train_fix(cfg: Config | None, where: str | Path | None = None, broken: bool = False) -> str:

@@ -45,11 +45,10 @@ from tqdm.auto import tqdm
 
 from fmctd_dist.artifacts import first_line
 from fmctd_dist.config import Config, load_config
-from fmctd_dist.denoiser.ray_pool import DenoiserPool, RayDenoiser, auto_actors, unwrap_ray_error
+from fmctd_dist.denoiser.ray_pool import DenoiserPool, RayDenoiser, auto_actors, kill_quietly, unwrap_ray_error, where
 from fmctd_dist.errors import ConfigError, DeviceError
-from fmctd_dist.evaluation.results import describe
 from fmctd_dist.evaluation.grid import Prepared, grid, missing, prepare, provenance
-from fmctd_dist.evaluation.results import ResultStore
+from fmctd_dist.evaluation.results import ResultStore, describe
 from fmctd_dist.family import HooksFor
 from fmctd_dist.planners.base import PlanOutput
 
@@ -128,10 +127,6 @@ class EnvActor:
         return where()
 
 
-def where() -> dict[str, Any]:
-    return {"pid": os.getpid(), "node_id": ray.get_runtime_context().get_node_id()}
-
-
 # What a dead actor, worker process or node looks like to its caller (not an error of the episode).
 LOST = (RayActorError, NodeDiedError, OwnerDiedError, ObjectLostError, WorkerCrashedError, LocalRayletDiedError)
 
@@ -153,14 +148,6 @@ def episode_pair(p: Prepared, denoisers: list) -> tuple:
     opts = {"scheduling_strategy": "SPREAD", "max_restarts": 0}
     driver = PlannerDriver.options(**opts).remote(p, denoisers)
     return EnvActor.options(**opts).remote(p, driver), driver
-
-
-def kill_quietly(actors) -> None:
-    for a in actors:
-        try:
-            ray.kill(a, no_restart=True)
-        except Exception:  # noqa: BLE001 - already gone
-            pass
 
 
 def check_ray_config(p: Prepared) -> None:
@@ -188,17 +175,13 @@ def pool_size(p: Prepared) -> tuple[int, int]:
 
 def check_cluster(p: Prepared, n_actors: int) -> None:
     """After ray.init, before any actor: the cluster must hold what the pool asks for."""
-    r = p.cfg.ray
-    res = ray.cluster_resources()
-    need_gpu = n_actors * r.num_gpus
-    if need_gpu > res.get("GPU", 0.0):
-        raise DeviceError(f"{n_actors} denoiser actor(s) x ray.num_gpus={r.num_gpus} need {need_gpu:g} GPU(s) "
-                          f"but the Ray cluster has {res.get('GPU', 0.0):g}; "
-                          f"lower ray.denoiser_actors or add GPU nodes")
-    need_cpu = n_actors * r.num_cpus
-    if need_cpu > res.get("CPU", 0.0):
-        raise DeviceError(f"{n_actors} denoiser actor(s) x ray.num_cpus={r.num_cpus} need {need_cpu:g} CPU(s) "
-                          f"but the Ray cluster has {res.get('CPU', 0.0):g}; lower ray.denoiser_actors or ray.num_cpus")
+    r, res = p.cfg.ray, ray.cluster_resources()
+    for kind, each, fix in (("GPU", r.num_gpus, "lower ray.denoiser_actors or add GPU nodes"),
+                            ("CPU", r.num_cpus, "lower ray.denoiser_actors or ray.num_cpus")):
+        need, have = n_actors * each, res.get(kind, 0.0)
+        if need > have:
+            raise DeviceError(f"{n_actors} denoiser actor(s) x ray.num_{kind.lower()}s={each} need {need:g} {kind}(s) "
+                              f"but the Ray cluster has {have:g}; {fix}")
 
 
 # Environment of a Ray cluster this process starts itself. Ray runs its workers at nice 15, so on
