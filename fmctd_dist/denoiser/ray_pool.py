@@ -1,15 +1,11 @@
 """RayDenoiser: the Denoiser protocol over a pool of ``DenoiserActor``s (docs/design.md §6-9).
 
-A batch is cut in job order into micro-batches of exactly M = ``ray.micro_batch`` jobs (the
-last one padded, :func:`micro_batch_indices`, the same cut as :class:`LocalDenoiser`), so
-every model call has the same shapes with 1 actor, N actors or no Ray, and plans are bitwise
-equal on CPU. The micro-batches are then grouped, in order, into one contiguous segment per live
-actor, and each segment is one call (docs/design.md §8: segment-sized calls, one per actor for each
-expansion / simulation batch); the actor's LocalDenoiser cuts it back into the same micro-batches.
-Segments go least-loaded over the actors and are gathered with ``ray.wait``; a segment whose
-actor died or did not answer within ``ray.call_timeout_s`` per micro-batch it holds is re-run on
-another live actor (denoise jobs are idempotent) and counted in ``DenoiseResult.retries``. When
-no live actor is left, one :class:`DeviceError` is raised -- never a hang.
+A batch is cut in job order into micro-batches of exactly M = ``ray.micro_batch`` jobs, the cut
+:class:`LocalDenoiser` makes, so every model call has the same shapes with 1 actor, N actors or no Ray
+and plans are bitwise equal on CPU. The micro-batches go in one contiguous segment (one call) per live
+actor, least-loaded first; a segment whose actor died or did not answer within ``ray.call_timeout_s``
+per micro-batch is re-run on another live actor (counted in ``DenoiseResult.retries``). With no live
+actor left, one :class:`DeviceError` is raised -- never a hang.
 
     pool = DenoiserPool.create(prepared, n=2)      # actors load the checkpoint (digest-checked)
     planner = make_planner(cfg, pool.denoiser(), normaliser, rules)
@@ -250,13 +246,8 @@ class RayDenoiser:
 
 
 class DenoiserPool:
-    """The denoiser actors of one run; hands out :class:`RayDenoiser` views that share them.
-
-    Several trees (threads here, or PlannerDriver actors given :attr:`actors`) may use the
-    pool at once; each actor serves segments from all of them in arrival order, and since a
-    micro-batch's bits do not depend on who else is queued, every tree gets the plan it would
-    get alone.
-    """
+    """The denoiser actors of one run; hands out :class:`RayDenoiser` views that share them. Several trees
+    may use them at once: a micro-batch's bits do not depend on who else is queued."""
 
     def __init__(self, actors: list, cfg: Config, infos: list[dict[str, Any]]):
         self.actors = actors

@@ -1,17 +1,10 @@
 """Diffusion Forcing training loop (docs/reference.md §5), resumable and deterministic per device.
 
-Every token gets its own timestep, so one network learns all the partially-noised
-sequences the pyramid schedule (and hence the tree search) will show it. The loop saves
-model + manifest + train_state every ``ckpt_every`` steps; rerunning the same command
-continues from the last save with optimiser and RNG states restored, so a killed run and
-an uninterrupted one produce the same weights (bitwise on CPU). ``train.time_budget_s`` stops
-a run once its recorded wall time (or, ``train.budget_clock=cpu``, its CPU time) reaches the budget
-(recipe arms at equal compute); the recipe levers ``train.lr_schedule``, ``train.precision``
-(bf16 autocast of the training step), ``train.boundary_weight`` (a loss on the steps across
-token boundaries, measured in ``train.boundary_space``: the frames, or positions read from them),
-``train.position_weight`` (a loss on the positions of each token's end frames) and
-``train.clean_context`` (the context token fed as the sampler feeds it) default to the paper's
-constant LR, fp32, plain token loss and noised context.
+Every token gets its own timestep, so one network learns all the partially-noised sequences the
+pyramid schedule (and hence the tree search) will show it. A rerun continues from the last save with
+optimiser and RNG states restored, so a killed run ends with the uninterrupted run's weights (bitwise
+on CPU). The recipe levers (train.lr_schedule, precision, boundary_*, position_weight, clean_context;
+see TrainConfig) default to the paper's recipe (:data:`PAPER_RECIPE`).
 """
 
 from __future__ import annotations
@@ -407,13 +400,6 @@ def update_ema(ema: torch.nn.Module, model: torch.nn.Module, decay: float, step:
 
 def _summary(step: int, wall: float, history: dict, out_dir: Path, model: DFTransformer,
              resumed_from: int | None) -> dict[str, Any]:
-    train_hist, val_hist = history["train"], history["val"]
-    return {
-        "step": step,
-        "wall_time_s": wall,
-        "final_losses": {"train": train_hist[-1][1] if train_hist else None,
-                         "val": val_hist[-1][1] if val_hist else None},
-        "param_count": model.num_params(),
-        "out_dir": str(out_dir),
-        "resumed_from": resumed_from,
-    }
+    last = {k: history[k][-1][1] if history[k] else None for k in ("train", "val")}
+    return {"step": step, "wall_time_s": wall, "final_losses": last, "param_count": model.num_params(),
+            "out_dir": str(out_dir), "resumed_from": resumed_from}

@@ -23,9 +23,8 @@ from fmctd_dist.denoiser.runtime import check_compile
 from fmctd_dist.device import resolve_device, set_threads
 from fmctd_dist.diffusion.checkpoint import read_manifest, verify_checkpoint
 from fmctd_dist.errors import CheckpointError, ResultsError
-from fmctd_dist.evaluation.results import describe
 from fmctd_dist.evaluation.identity import config_hash, differences, identity_columns
-from fmctd_dist.evaluation.results import ResultStore
+from fmctd_dist.evaluation.results import ResultStore, describe
 from fmctd_dist.family import Episodes, HooksFor, PlanRules
 
 

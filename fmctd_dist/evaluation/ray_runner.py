@@ -7,16 +7,11 @@
     PlannerDriver: owns the tree of each plan call (selection/backup are serial, here) and
                  shards every expansion/simulation batch over the shared denoiser actors
 
-Only the job process writes files and draws progress bars; actors return rows and timings.
-Errors raised on purpose inside actors (FmctdError) reach the user as themselves.
-
-Faults (docs/design.md §9; tests/test_ray_faults.py, tests/test_ray_multinode.py): a dead denoiser actor's
-micro-batches are re-routed (RayDenoiser); an episode whose EnvActor or PlannerDriver dies (killed,
-out of memory, its node gone) or is still running after ``ray.episode_timeout_s`` (alive but hung)
-left no row, so it is run again from the start on a new pair, up to ``ray.max_restarts`` times per
-episode; both count in the row's ``retries``. Plans are a pure
-function of (config, checkpoint, seed), so every row is the one a fault-free run writes. A stopped
-or killed job keeps the rows it wrote; rerunning it runs only the missing keys.
+Only the job process writes files and draws progress bars; actors return rows and timings, and
+errors raised on purpose inside actors (FmctdError) reach the user as themselves. Faults (docs/design.md
+§9): a dead denoiser actor's micro-batches are re-routed (RayDenoiser); an episode whose actors die or
+hang past ``ray.episode_timeout_s`` is re-run on a new pair (:func:`run_ray`). A stopped job keeps the
+rows it wrote; rerunning it runs only the missing keys.
 
 Python entry point (joins a running cluster, or ``ray.init()`` first yourself)::
 
@@ -89,7 +84,6 @@ class PlannerDriver:
         return None if r is None else r.tree
 
     def info(self) -> dict[str, Any]:
-        """Where this driver runs: pid and Ray node id (what a fault test kills)."""
         return where()
 
 
@@ -123,7 +117,6 @@ class EnvActor:
         return self.episodes.run(self.planner, task, seed)
 
     def info(self) -> dict[str, Any]:
-        """Where this env actor runs: pid and Ray node id (what a fault test kills)."""
         return where()
 
 
@@ -252,8 +245,9 @@ def run_ray(p: Prepared, store: ResultStore, progress: bool = True,
 
         def rerun(pair: tuple, key: tuple[int, int], why: str) -> None:
             """Its env actor or planner driver died (killed, OOM, node gone) or hung: the half-run episode
-            left no row, so run it again from the start on a new pair. A plan is a pure function of
-            (config, checkpoint, seed): the rerun's row is the one a fault-free run writes."""
+            left no row, so run it again from the start on a new pair, at most ray.max_restarts times (counted
+            in the row's ``retries``). A plan is a pure function of (config, checkpoint, seed): the rerun's
+            row is the one a fault-free run writes."""
             n = reruns[key] = reruns.get(key, 0) + 1
             if n > cfg.ray.max_restarts:
                 raise DeviceError(
