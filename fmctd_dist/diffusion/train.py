@@ -123,13 +123,9 @@ class DFLoss(NoisingLoss):
 
 def boundary_loss(pred: torch.Tensor, x0: torch.Tensor, weight: torch.Tensor, frame_stack: int,
                   readout: Readout | None = None) -> torch.Tensor:
-    """Weighted MSE of the step across each token boundary, predicted vs true.
-
-    pred, x0: [B, T, D] tokens of ``frame_stack`` frames; weight: [B, T] per-token loss weights.
-    A per-token offset error, which the token MSE barely distinguishes from a shared one, shows
-    here in full; each boundary is weighted by its noisier (lower-weighted) token. ``readout``
-    (train.boundary_space=position) maps frames [..., d] to positions [..., 2] before the step is taken.
-    """
+    """Weighted MSE of the step across each token boundary (pred, x0 [B, T, D], weight [B, T]), predicted vs true:
+    a per-token offset error, which the token MSE barely sees, shows here in full. Each boundary has its noisier
+    token's weight; ``readout`` (train.boundary_space=position) maps frames to positions first."""
     d = x0.shape[-1] // frame_stack
 
     def step(x: torch.Tensor) -> torch.Tensor:
@@ -144,15 +140,10 @@ def boundary_loss(pred: torch.Tensor, x0: torch.Tensor, weight: torch.Tensor, fr
 
 def position_loss(pred: torch.Tensor, x0: torch.Tensor, weight: torch.Tensor, frame_stack: int,
                   readout: Readout) -> torch.Tensor:
-    """Weighted MSE of each token's first and last frame's position as ``readout`` reads it, predicted vs
-    true (train.position_weight).
-
-    The token loss weighs every frame dimension alike; where most of a frame's variance is in dimensions
-    that carry no position (a visual latent's view jitter), a prediction can be close in the frame
-    and far in position. This term measures the error where the plan's value and guidance measure it.
-    Only a token's two end frames are read: they carry its offset (the error that makes plans jump at
-    token boundaries), and reading all ten through the visual estimator (2 x 512) tripled a dense step.
-    """
+    """Weighted MSE of each token's first and last frame's position as ``readout`` reads it, predicted vs true
+    (train.position_weight): where most of a frame's variance carries no position (a visual latent's view
+    jitter), a prediction close in the frame can be far in position. Only the two end frames are read: they
+    carry the token's offset, and reading all ten through the visual estimator tripled a dense step."""
     b, t, dd = x0.shape
     d = dd // frame_stack
     ends = lambda x: x.reshape(b, t, frame_stack, d)[:, :, [0, frame_stack - 1]]  # noqa: E731  [B, T, 2, d]
@@ -195,13 +186,9 @@ def make_loss(cfg: Config, device: torch.device, readout: Readout | None = None)
 
 
 def position_readout(cfg: Config, data: Any, device: torch.device) -> tuple[Readout | None, dict[str, Any]]:
-    """The data's position readout (frozen) when a lever needs it (train.boundary_space=position,
-    train.position_weight>0), and what the manifest records.
-
-    A data module offers ``position_readout(cfg) -> (readout, provenance)`` when its frames have a
-    position to read; asking for a position lever on data without one, or for the position space of a
-    boundary loss that is off, is one ConfigError before any training.
-    """
+    """The data's frozen position readout (``data.position_readout(cfg) -> (readout, provenance)``) when a lever
+    needs it (train.boundary_space=position, train.position_weight>0), and what the manifest records; a lever
+    the data or model cannot serve, or the position space of an off boundary loss, is one ConfigError."""
     tc = cfg.train
     if tc.boundary_space == "token" and not tc.position_weight:
         return None, {}

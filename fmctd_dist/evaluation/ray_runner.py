@@ -154,13 +154,8 @@ def check_ray_config(p: Prepared) -> None:
 
 
 def pool_size(p: Prepared) -> tuple[int, int]:
-    """(denoiser actors, env actors) for the cluster we are connected to.
-
-    ``ray.denoiser_actors=0`` (the default) gives one actor per GPU (``ray.num_gpus`` each) or per
-    ``ray.num_cpus`` CPUs the cluster has, so no core sits idle; ``ray.env_actors=0`` runs ``eval.in_flight``
-    episodes at once per denoiser actor (one: more would queue on them; several: their jobs are pooled).
-    Explicit values win.
-    """
+    """(denoiser actors, env actors) for the connected cluster: ``ray.denoiser_actors=0`` is :func:`auto_actors`,
+    ``ray.env_actors=0`` runs ``eval.in_flight`` episodes at once per denoiser actor; explicit values win."""
     r = p.cfg.ray
     n = r.denoiser_actors or auto_actors(r)
     return n, r.env_actors or n * p.cfg.eval.in_flight
@@ -299,13 +294,9 @@ def run_ray(p: Prepared, store: ResultStore, progress: bool = True,
 
 
 def evaluate(overrides: list[str] | Config, hooks_for: HooksFor, progress: bool = True) -> list[dict[str, Any]]:
-    """Evaluate on Ray and return one row per (task, seed) of the grid (resumed rows included).
-
-    ``overrides`` are the words of ``jobs/eval.py`` (``["method=fast-mctd", "tasks=[1]"]``) or a
-    Config; ``hooks_for``: env name -> its family's hook module (``fmctd_dist.families.hooks_for``).
-    The runner is Ray whatever ``eval.runner`` says. Joins the cluster ``ray.init()``
-    made (or a running one), else starts a local one for this call.
-    """
+    """Evaluate on Ray (whatever ``eval.runner`` says; a cluster as :func:`connect` finds one) and return one row
+    per (task, seed) of the grid, resumed rows included. ``overrides``: the words of ``jobs/eval.py`` or a
+    Config; ``hooks_for``: env name -> its family's hook module (``fmctd_dist.families.hooks_for``)."""
     cfg = overrides if isinstance(overrides, Config) else load_config(list(overrides))
     cfg = dataclasses.replace(cfg, eval=dataclasses.replace(cfg.eval, runner="ray"))
     p = prepare(cfg, hooks_for)

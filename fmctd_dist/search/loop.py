@@ -69,9 +69,8 @@ class SearchParams:
                              f"guidance_scales={self.guidance_scales} bad_plan_tries={self.bad_plan_tries}")
 
     @classmethod
-    def from_method(
-        cls, method: "MethodConfig", *, time_limit_s: float = 0.0, clip_noise: float = 20.0
-    ) -> "SearchParams":
+    def from_method(cls, method: "MethodConfig", *, time_limit_s: float = 0.0,
+                    clip_noise: float = 20.0) -> "SearchParams":
         """From a MethodConfig (time limit and noise clip live in eval/diffusion configs), cast to each field's type."""
         def cast(default: object, v: object) -> object:
             return tuple(float(s) for s in v) if isinstance(default, tuple) else type(default)(v)
@@ -116,9 +115,8 @@ class SearchResult:
     stats: list[IterStats] = field(default_factory=list)
 
 
-def initial_noise(
-    plan_seed: int, node: int, attempt: int, copy: int, shape: tuple[int, ...], clip: float
-) -> np.ndarray:
+def initial_noise(plan_seed: int, node: int, attempt: int, copy: int, shape: tuple[int, ...],
+                  clip: float) -> np.ndarray:
     """Clipped standard-normal float32 noise for one depth-1 job, a pure function of its key."""
     key = [plan_seed, node, attempt] + ([copy] if copy else [])
     z = np.random.default_rng(np.random.SeedSequence(key)).standard_normal(shape)
@@ -180,19 +178,9 @@ class _Fallbacks:
         return STATUS_STAY, 0.0, np.repeat(start[None].astype(np.float32), max(frames, 1), axis=0)
 
 
-def search(
-    denoiser: Denoiser,
-    schedule: PyramidSchedule,
-    codec: PlanCodec,
-    start: np.ndarray,
-    goal: np.ndarray,
-    params: SearchParams,
-    plan_seed: int,
-    *,
-    actions: Actions | None = None,
-    value: PlanValue | None = None,
-    clock: Callable[[], float] = time.perf_counter,
-) -> SearchResult:
+def search(denoiser: Denoiser, schedule: PyramidSchedule, codec: PlanCodec, start: np.ndarray, goal: np.ndarray,
+           params: SearchParams, plan_seed: int, *, actions: Actions | None = None, value: PlanValue | None = None,
+           clock: Callable[[], float] = time.perf_counter) -> SearchResult:
     """Plan from ``start`` [d] to ``goal`` [d] (world units); see the module docstring.
 
     ``actions``: the child slots (default: one per ``params.guidance_scales``, every dim
