@@ -2,7 +2,7 @@
 
 K (``method.parallel``), w, RAS, leaf parallelisation and H (``jump``, which also picks the
 sparse checkpoint) are config, read once by :func:`fmctd_dist.planners.make_planner`; this class only wires the
-schedule, codec and denoiser into :func:`fmctd_dist.search.search`, with the action set and plan value the env
+schedule, codec and denoiser into :func:`fmctd_dist.search.loop.search`, with the action set and plan value the env
 family's plan rules give for each call (handed in by the caller), and expands a sparse plan to one waypoint per
 env step.
 """
