@@ -120,12 +120,9 @@ def type_error(manifest: Any, required: Types, optional: Types | None = None) ->
 
 def read_weights_manifest(ckpt_dir: str | Path, who: str, missing_fix: Fix, broken_fix: Fix,
                           check: Callable[[Any], str] | None = None) -> dict[str, Any]:
-    """The manifest of a dir written by :func:`save_weights`, before its kind is even read.
-
-    ``missing_fix`` ends the error for a dir that does not exist, ``broken_fix`` the one for a dir
-    with a file missing, an unreadable manifest or one ``check`` finds malformed (its words name the field;
-    default: anything but a JSON object).
-    """
+    """The manifest of a dir written by :func:`save_weights`. ``missing_fix`` ends the error for a dir that does
+    not exist, ``broken_fix`` the one for a file missing, an unreadable manifest or one ``check`` finds malformed
+    (its words name the field; default: anything but a JSON object)."""
     ckpt_dir = Path(ckpt_dir)
     if not ckpt_dir.exists():
         raise CheckpointError(f"{who}: {ckpt_dir} does not exist; {fix_text(missing_fix)}")
@@ -155,11 +152,8 @@ def verify_weights(ckpt_dir: str | Path, manifest: dict[str, Any], where: str, f
 
 
 def torch_load_weights(path: Path, where: str, fix: Fix) -> Any:
-    """``torch.load(path, weights_only=True)``; anything that does not load is one CheckpointError.
-
-    weights_only=True unpickles tensors and plain containers only, so a file carrying code
-    (a ``__reduce__`` payload) is refused before any of it runs.
-    """
+    """``torch.load(path, weights_only=True)`` (a file carrying code is refused before any of it runs); anything
+    that does not load is one CheckpointError."""
     import torch
 
     try:
@@ -171,10 +165,8 @@ def torch_load_weights(path: Path, where: str, fix: Fix) -> Any:
 
 
 def load_weights(ckpt_dir: str | Path, net: nn.Module | Callable[[], nn.Module], where: str, fix: Fix) -> nn.Module:
-    """model.pt loaded (strict) into ``net`` (or what ``net()`` builds from the manifest) -> it, in eval mode.
-
-    A file that does not unpickle as weights, or weights of another shape, is one CheckpointError.
-    """
+    """model.pt loaded (strict) into ``net`` (or what ``net()`` builds from the manifest) -> it, in eval mode;
+    weights that do not load or fit are one CheckpointError."""
     from torch import nn
 
     state = torch_load_weights(Path(ckpt_dir) / MODEL_FILE, where, fix)

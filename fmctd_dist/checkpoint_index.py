@@ -1,17 +1,10 @@
 """checkpoints/README.md, generated from the manifests: what each shipped checkpoint dir is and who reads it.
 
-Why generated: the dirs under ``checkpoints/`` are replaced whenever a model is retrained, and a
-hand-written list of them went stale within sessions (snapshots nobody read piled up beside the
-defaults). Every fact in the index comes from a dir's own ``manifest.json`` (kind, env, jump,
-digest, steps, lineage, hours, validation numbers) or from the configs (which dirs they read), so
-``tests/test_checkpoint_index.py`` can regenerate it in memory and hold the committed file to it.
-
-Why a dir is there: a config reads it (:func:`config_readers`: for every ``configs/env`` x
-``configs/method`` pair and the :data:`VARIANTS` below, the dirs the eval job's own up-front checks
-open, found as ``ray job submit`` finds its upload (:func:`fmctd_dist.evaluation.job_upload.checkpoints_read`),
-plus the AntMaze data's ``data.expert``), or :data:`PURPOSES` names what else needs it. A dir that is
-neither is a snapshot: it leaves the tree (its digest stays in the result rows and docs/notebook/, git
-keeps its bytes). Regenerate with ``python jobs/report.py --checkpoints``.
+Generated because a hand-written list went stale within sessions: every fact comes from a dir's own
+``manifest.json`` or from the configs, so ``tests/test_checkpoint_index.py`` holds the committed file to
+it. A dir is there because a config reads it (:func:`config_readers`) or :data:`PURPOSES` names what else
+needs it; a dir that is neither is a snapshot and leaves the tree (git keeps its bytes). Regenerate with
+``python jobs/report.py --checkpoints``.
 """
 
 from __future__ import annotations
@@ -198,9 +191,8 @@ def size_mb(d: Path) -> float:
     return sum(p.stat().st_size for p in d.rglob("*") if p.is_file()) / 1e6
 
 
-def rows(root: Path = CHECKPOINTS, readers: dict[str, list[str]] | None = None) -> list[dict[str, Any]]:
+def rows(root: Path, readers: dict[str, list[str]]) -> list[dict[str, Any]]:
     """One dict per dir under ``root``, sorted by family then name; a dir without a manifest is an error."""
-    readers = config_readers() if readers is None else readers
     out = []
     for d in sorted(p for p in root.iterdir() if p.is_dir()):
         path = d / "manifest.json"

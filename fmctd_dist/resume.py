@@ -1,13 +1,9 @@
 """Resumable training, written once for the five loops (planner, low-level policy, ant expert, VAE, heads).
 
-Each loop saves ``train_state.pt`` (its networks, optimisers, RNG states (:func:`part_states`), step, clock
-and history (:meth:`TrainRun.state`), and what it was trained on) at every checkpoint; rerunning the same
-command loads it, checks that the config and the data are the ones it was saved with (:func:`check_resume`:
-one CheckpointError naming the field otherwise) and continues, bitwise the uninterrupted run where the
-loop's RNGs allow. :class:`TrainRun` keeps a call's step, progress bar and cadences (log, validate,
-checkpoint); the budget :class:`Clock` counts wall or CPU seconds over all runs of one out dir, and
-:func:`snapshot_due` keeps a copy of the weights every ``snapshot_every_s`` of it. What a step does,
-and what a finished or shipped dir means, stays in each loop.
+Each loop saves ``train_state.pt`` (networks, optimisers, RNG states, step, clock, history, and what it
+was trained on) at every checkpoint; rerunning the same command loads it, checks the config and data
+(:func:`check_resume`) and continues, bitwise the uninterrupted run where the loop's RNGs allow. What a
+step does, and what a finished or shipped dir means, stays in each loop.
 """
 
 from __future__ import annotations

@@ -7,11 +7,9 @@ same :mod:`~fmctd_dist.config.loader`); nothing else reads YAML. One concept per
 """
 
 from fmctd_dist.config.checks import is_ant, validate  # noqa: F401
-from fmctd_dist.config.loader import (ALIASES, GROUPS, RETIRED, all_keys,  # noqa: F401
-                                      apply_override, build, config_from_dict, from_dict, group_layers, group_names,
-                                      load_config, merge_checked, parse_overrides, planner_config)
+from fmctd_dist.config.loader import (apply_override, build, config_from_dict, from_dict,  # noqa: F401
+                                      group_layers, group_names, load_config, parse_overrides, planner_config)
 from fmctd_dist.config.ranges import SEED, THREADS, Range, check_ranges, field_ranges, spec  # noqa: F401
 from fmctd_dist.config.repo import REPO_ROOT, git_sha, resolve_path  # noqa: F401
-from fmctd_dist.config.schema import (DEVICES, MODEL_KINDS, PROTOCOLS, TASK_IDS, Config, DataConfig,  # noqa: F401
-                                      DiffusionConfig, EnvConfig, EvalConfig, MethodConfig, ModelConfig, RayConfig,
-                                      TrainConfig, VisualConfig)
+from fmctd_dist.config.schema import (DEVICES, MODEL_KINDS, PROTOCOLS, TASK_IDS, Config,  # noqa: F401
+                                      DiffusionConfig, MethodConfig, ModelConfig, RayConfig)

@@ -38,14 +38,10 @@ Words = list[tuple[str, str]]
 
 def all_keys(node: Any, prefix: str = "") -> list[str]:
     """Every dotted leaf key of a dataclass config instance (what an override may name)."""
-    keys = []
+    keys: list[str] = []
     for f in dataclasses.fields(node):
-        value = getattr(node, f.name)
-        name = f"{prefix}{f.name}"
-        if dataclasses.is_dataclass(value):
-            keys.extend(all_keys(value, name + "."))
-        else:
-            keys.append(name)
+        value, name = getattr(node, f.name), f"{prefix}{f.name}"
+        keys += all_keys(value, name + ".") if dataclasses.is_dataclass(value) else [name]
     return keys
 
 
@@ -62,10 +58,7 @@ def _group_file(group: str, name: str) -> Any:
 
 
 def merge_checked(base: Any, update: Any, where: str, schema: type = Config) -> Any:
-    """OmegaConf.merge; a bad key or type becomes one ConfigError naming the key (and its type).
-
-    ``schema`` is the dataclass the keys come from.
-    """
+    """OmegaConf.merge; a bad key or type of ``schema`` becomes one ConfigError naming the key (and its type)."""
     try:
         return OmegaConf.merge(base, update)
     except OmegaConfBaseException as e:
@@ -157,11 +150,7 @@ def group_layers(env: str, method: str) -> Iterable[tuple[Any, str]]:
 
 def planner_config(groups: dict[str, str], dotted: Words, env: str, method: str) -> Config:
     """The planner's Config from parsed words (:func:`parse_overrides`); ``env``/``method``: the default groups.
-
-    Order: dataclass defaults, configs/env/<env>.yaml, configs/method/<method>.yaml, then dotted overrides in
-    the order given. A family that keeps its own configs (``registry.Family.configs``) has its env file read
-    from there.
-    """
+    Order: dataclass defaults, the env then the method YAML (:func:`group_layers`), then the overrides in order."""
     return build(Config, dotted, validate, group_layers(groups.get("env", env), groups.get("method", method)))
 
 

@@ -39,15 +39,8 @@ class Range:
     why: str = ""
 
     def describe(self) -> str:
-        parts = []
-        if self.ge is not None:
-            parts.append(f">= {self.ge:g}")
-        if self.gt is not None:
-            parts.append(f"> {self.gt:g}")
-        if self.le is not None:
-            parts.append(f"<= {self.le:g}")
-        if self.lt is not None:
-            parts.append(f"< {self.lt:g}")
+        bounds = ((">=", self.ge), (">", self.gt), ("<=", self.le), ("<", self.lt))
+        parts = [f"{op} {b:g}" for op, b in bounds if b is not None]
         if self.multiple_of is not None:
             parts.append(f"a multiple of {self.multiple_of}")
         text = " and ".join(parts)
@@ -85,7 +78,6 @@ def spec(default: Any = None, *, factory: Callable[[], Any] | None = None, **lim
     if factory is not None:
         return field(default_factory=factory, metadata=meta)
     return field(default=default, metadata=meta)
-
 
 
 def field_ranges(node: Any, prefix: str = "") -> dict[str, Range]:

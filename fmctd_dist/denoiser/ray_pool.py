@@ -1,15 +1,11 @@
 """RayDenoiser: the Denoiser protocol over a pool of ``DenoiserActor``s (docs/design.md §6-9).
 
-A batch is cut in job order into micro-batches of exactly M = ``ray.micro_batch`` jobs (the
-last one padded, :func:`micro_batch_indices`, the same cut as :class:`LocalDenoiser`), so
-every model call has the same shapes with 1 actor, N actors or no Ray, and plans are bitwise
-equal on CPU. The micro-batches are then grouped, in order, into one contiguous segment per live
-actor, and each segment is one call (docs/design.md §8: segment-sized calls, one per actor for each
-expansion / simulation batch); the actor's LocalDenoiser cuts it back into the same micro-batches.
-Segments go least-loaded over the actors and are gathered with ``ray.wait``; a segment whose
-actor died or did not answer within ``ray.call_timeout_s`` per micro-batch it holds is re-run on
-another live actor (denoise jobs are idempotent) and counted in ``DenoiseResult.retries``. When
-no live actor is left, one :class:`DeviceError` is raised -- never a hang.
+A batch is cut in job order into micro-batches of exactly M = ``ray.micro_batch`` jobs, the cut
+:class:`LocalDenoiser` makes, so every model call has the same shapes with 1 actor, N actors or no Ray
+and plans are bitwise equal on CPU. The micro-batches go in one contiguous segment (one call) per live
+actor, least-loaded first; a segment whose actor died or did not answer within ``ray.call_timeout_s``
+per micro-batch is re-run on another live actor (counted in ``DenoiseResult.retries``). With no live
+actor left, one :class:`DeviceError` is raised -- never a hang.
 
     pool = DenoiserPool.create(prepared, n=2)      # actors load the checkpoint (digest-checked)
     planner = make_planner(cfg, pool.denoiser(), normaliser, rules)
@@ -105,7 +101,7 @@ class DenoiserActor:
         """What this actor sees: gpu_ids, cuda_device_count, device, torch_threads, niceness, pid, node."""
         if self._error is not None:
             raise self._error
-        return {**self._info, "pid": os.getpid(), "node_id": ray.get_runtime_context().get_node_id()}
+        return {**self._info, **where()}
 
     def denoise(self, batch: DenoiseBatch, micro_batch: int) -> DenoiseResult:
         """One segment: whole micro-batches of ``micro_batch`` jobs in job order (the caller cut and padded
@@ -250,13 +246,8 @@ class RayDenoiser:
 
 
 class DenoiserPool:
-    """The denoiser actors of one run; hands out :class:`RayDenoiser` views that share them.
-
-    Several trees (threads here, or PlannerDriver actors given :attr:`actors`) may use the
-    pool at once; each actor serves segments from all of them in arrival order, and since a
-    micro-batch's bits do not depend on who else is queued, every tree gets the plan it would
-    get alone.
-    """
+    """The denoiser actors of one run; hands out :class:`RayDenoiser` views that share them. Several trees
+    may use them at once: a micro-batch's bits do not depend on who else is queued."""
 
     def __init__(self, actors: list, cfg: Config, infos: list[dict[str, Any]]):
         self.actors = actors
@@ -302,8 +293,18 @@ class DenoiserPool:
         return RayDenoiser.from_config(self.actors, self.cfg)
 
     def shutdown(self) -> None:
-        for a in self.actors:
-            try:
-                ray.kill(a, no_restart=True)
-            except Exception:  # noqa: BLE001 - already gone
-                pass
+        kill_quietly(self.actors)
+
+
+def kill_quietly(actors: list) -> None:
+    """Kill every actor of ``actors`` that is still alive."""
+    for a in actors:
+        try:
+            ray.kill(a, no_restart=True)
+        except Exception:  # noqa: BLE001 - already gone
+            pass
+
+
+def where() -> dict[str, Any]:
+    """Where this process runs: pid and Ray node id (what a fault test kills)."""
+    return {"pid": os.getpid(), "node_id": ray.get_runtime_context().get_node_id()}

@@ -21,6 +21,7 @@ from fmctd_dist.artifacts import (
     MANIFEST_FILE, MODEL_FILE, Types, load_weights, read_weights_manifest, save_weights, type_error, verify_weights,
 )
 from fmctd_dist.config import REPO_ROOT, Config, ModelConfig, resolve_path
+from fmctd_dist.config.repo import git
 from fmctd_dist.tokens import Normaliser
 from fmctd_dist.diffusion.model import DFTransformer
 from fmctd_dist.diffusion.models import build_model, diffusion_config_from_dict, model_config_from_dict
@@ -48,13 +49,8 @@ def saved_model(manifest: dict[str, Any]) -> dict[str, Any]:
 
 
 def save_checkpoint(ckpt_dir: str | Path, model: DFTransformer, manifest_fields: dict[str, Any]) -> dict[str, Any]:
-    """Write model.pt then manifest.json; returns the manifest.
-
-    ``manifest_fields`` must hold ``config`` (Config.to_dict()); by convention also
-    dataset_digest, data_seed, git_sha, train_steps, wall_time_s, final_losses, normaliser
-    ({mean, std}). This adds model_sha256, digest (its first 16 hex), param_count,
-    n_tokens, token_dim, model_kind and format.
-    """
+    """Write model.pt then manifest.json (``manifest_fields`` + format, model_kind, n_tokens, token_dim and
+    what :func:`~fmctd_dist.artifacts.save_weights` adds); returns the manifest."""
     if "config" not in manifest_fields:
         raise ValueError("manifest_fields needs 'config' (Config.to_dict())")
     return save_weights(ckpt_dir, model, {**manifest_fields, "format": FORMAT_VERSION, "model_kind": model.kind,
@@ -69,14 +65,7 @@ def _fresh_dir(cfg: Config) -> Path:
 
 def _tracked(path: Path) -> bool:
     """True when ``path`` is a checkpoint shipped in git (then `git checkout` restores it)."""
-    import subprocess
-
-    try:
-        out = subprocess.run(["git", "ls-files", "--error-unmatch", str(path / MODEL_FILE), str(path / MANIFEST_FILE)],
-                             cwd=REPO_ROOT, capture_output=True, text=True, timeout=10)
-        return out.returncode == 0
-    except (OSError, subprocess.SubprocessError):
-        return False
+    return git("ls-files", "--error-unmatch", str(path / MODEL_FILE), str(path / MANIFEST_FILE)) is not None
 
 
 def _train_fix(cfg: Config | None, where: str | Path | None = None, broken: bool = False) -> str:
@@ -204,12 +193,8 @@ def _model_elsewhere(cfg: Config, where: Path) -> str:
 
 
 def check_compatible(manifest: dict[str, Any], cfg: Config, where: str | Path) -> None:
-    """Raise one CheckpointError naming the first field where checkpoint and config disagree.
-
-    The fix offers both ways out: the words that make the config fit this checkpoint, and a
-    model of the config's own shape (the expected dir if it holds one, else the command that
-    trains one into a dir that does not overwrite this checkpoint).
-    """
+    """Raise one CheckpointError naming the first field where checkpoint and config disagree, with both ways
+    out: the words that fit the config to this checkpoint, and a model of the config's shape elsewhere."""
     bad = _mismatch(manifest, cfg)
     if bad is None:
         return
@@ -223,12 +208,8 @@ def check_compatible(manifest: dict[str, Any], cfg: Config, where: str | Path) -
 
 
 def verify_checkpoint(ckpt_dir: str | Path, cfg: Config, manifest: dict[str, Any] | None = None) -> dict[str, Any]:
-    """Everything a load of cfg's model from ckpt_dir checks short of unpickling it -> the manifest.
-
-    Present and complete, manifest well-typed, trained for cfg (env, jump, model, n_tokens),
-    model.pt's sha256 the manifest's. Jobs call this before any actor starts. ``manifest``: the
-    one :func:`read_manifest` gave for this dir, when the caller has read it already.
-    """
+    """Everything a load of cfg's model from ckpt_dir checks short of unpickling it -> the manifest (jobs call
+    it before any actor starts); ``manifest``: the one :func:`read_manifest` gave, when the caller has it."""
     ckpt_dir = Path(ckpt_dir)
     manifest = read_manifest(ckpt_dir, cfg) if manifest is None else manifest
     check_compatible(manifest, cfg, ckpt_dir)
@@ -238,12 +219,8 @@ def verify_checkpoint(ckpt_dir: str | Path, cfg: Config, manifest: dict[str, Any
 
 def load_checkpoint(ckpt_dir: str | Path, cfg: Config | None = None,
                     expect_digest: str | None = None) -> tuple[DFTransformer, dict[str, Any]]:
-    """Verify and load a checkpoint -> (model on CPU in eval mode, manifest).
-
-    Checks: files exist, sha256 of model.pt matches the manifest, ``expect_digest`` (16-hex
-    digest or full sha256) matches, and when ``cfg`` is given env.name, jump, model.* and
-    n_tokens agree with it.
-    """
+    """Verify (as :func:`verify_checkpoint`, ``cfg`` optional) and load a checkpoint -> (model on CPU in eval
+    mode, manifest); ``expect_digest``: its 16-hex digest or full sha256, when known."""
     ckpt_dir = Path(ckpt_dir)
     manifest = read_manifest(ckpt_dir, cfg)
     if cfg is not None:  # before the sha: a checkpoint of another shape is named as such, corrupt or not
@@ -259,17 +236,9 @@ def load_checkpoint(ckpt_dir: str | Path, cfg: Config | None = None,
 
 
 def lineage(manifest: dict[str, Any], _seen: frozenset[Path] = frozenset()) -> dict[str, Any]:
-    """Training behind a model's weights, through every ``train.init_from`` ancestor.
-
-    Why: a continued model's ``train_steps`` and ``cpu_time_s`` count only its own run, so a
-    quality-against-hours curve would start each continuation at zero. ``lineage_cpu_s`` is None
-    where an ancestor predates this field and its CPU time is unknown (its steps are known: the
-    provenance always kept them). An ancestor still on disk (under its recorded path, or any
-    checkpoint or run dir holding its digest) is read again, so a record written before this field
-    (or from such a record) cannot undercount. ``lineage_samples`` (steps x batch, summed over the
-    ancestors) is what a curve should be read against when batch sizes differ along the way (a CPU run
-    at 128 continued on a GPU at 1024); None where a record lacks its batch size.
-    """
+    """Training behind a model's weights (steps, CPU seconds, samples = steps x batch), summed through every
+    ``train.init_from`` ancestor: a continued model's own ``train_steps`` start at zero. An ancestor still on
+    disk is read again, so an old record cannot undercount; a total is None where an ancestor lacks it."""
     parent = manifest.get("init_from") or {}
     on_disk = _ancestor_manifest(parent)
     if on_disk is not None and on_disk not in _seen:  # the same weights: their own record is the truth
@@ -287,10 +256,8 @@ def lineage(manifest: dict[str, Any], _seen: frozenset[Path] = frozenset()) -> d
 
 
 def _ancestor_manifest(parent: dict[str, Any]) -> Path | None:
-    """The manifest on disk of an ``init_from`` record's weights: at its recorded path if that still
-    holds its digest, else any ``checkpoints/*`` or ``runs/**`` manifest with that digest (a path
-    whose weights were replaced since, e.g. a shipped checkpoint swapped for its continuation).
-    The tree is scanned only when the recorded path misses."""
+    """The manifest on disk of an ``init_from`` record's weights: at its recorded path if that still holds its
+    digest, else any ``checkpoints/*`` or ``runs/**`` manifest with that digest (the path's weights replaced)."""
     digest = parent.get("digest")
     if not digest:
         return None

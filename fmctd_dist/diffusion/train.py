@@ -1,17 +1,10 @@
 """Diffusion Forcing training loop (docs/reference.md §5), resumable and deterministic per device.
 
-Every token gets its own timestep, so one network learns all the partially-noised
-sequences the pyramid schedule (and hence the tree search) will show it. The loop saves
-model + manifest + train_state every ``ckpt_every`` steps; rerunning the same command
-continues from the last save with optimiser and RNG states restored, so a killed run and
-an uninterrupted one produce the same weights (bitwise on CPU). ``train.time_budget_s`` stops
-a run once its recorded wall time (or, ``train.budget_clock=cpu``, its CPU time) reaches the budget
-(recipe arms at equal compute); the recipe levers ``train.lr_schedule``, ``train.precision``
-(bf16 autocast of the training step), ``train.boundary_weight`` (a loss on the steps across
-token boundaries, measured in ``train.boundary_space``: the frames, or positions read from them),
-``train.position_weight`` (a loss on the positions of each token's end frames) and
-``train.clean_context`` (the context token fed as the sampler feeds it) default to the paper's
-constant LR, fp32, plain token loss and noised context.
+Every token gets its own timestep, so one network learns all the partially-noised sequences the
+pyramid schedule (and hence the tree search) will show it. A rerun continues from the last save with
+optimiser and RNG states restored, so a killed run ends with the uninterrupted run's weights (bitwise
+on CPU). The recipe levers (train.lr_schedule, precision, boundary_*, position_weight, clean_context;
+see TrainConfig) default to the paper's recipe (:data:`PAPER_RECIPE`).
 """
 
 from __future__ import annotations
@@ -130,13 +123,9 @@ class DFLoss(NoisingLoss):
 
 def boundary_loss(pred: torch.Tensor, x0: torch.Tensor, weight: torch.Tensor, frame_stack: int,
                   readout: Readout | None = None) -> torch.Tensor:
-    """Weighted MSE of the step across each token boundary, predicted vs true.
-
-    pred, x0: [B, T, D] tokens of ``frame_stack`` frames; weight: [B, T] per-token loss weights.
-    A per-token offset error, which the token MSE barely distinguishes from a shared one, shows
-    here in full; each boundary is weighted by its noisier (lower-weighted) token. ``readout``
-    (train.boundary_space=position) maps frames [..., d] to positions [..., 2] before the step is taken.
-    """
+    """Weighted MSE of the step across each token boundary (pred, x0 [B, T, D], weight [B, T]), predicted vs true:
+    a per-token offset error, which the token MSE barely sees, shows here in full. Each boundary has its noisier
+    token's weight; ``readout`` (train.boundary_space=position) maps frames to positions first."""
     d = x0.shape[-1] // frame_stack
 
     def step(x: torch.Tensor) -> torch.Tensor:
@@ -151,15 +140,10 @@ def boundary_loss(pred: torch.Tensor, x0: torch.Tensor, weight: torch.Tensor, fr
 
 def position_loss(pred: torch.Tensor, x0: torch.Tensor, weight: torch.Tensor, frame_stack: int,
                   readout: Readout) -> torch.Tensor:
-    """Weighted MSE of each token's first and last frame's position as ``readout`` reads it, predicted vs
-    true (train.position_weight).
-
-    The token loss weighs every frame dimension alike; where most of a frame's variance is in dimensions
-    that carry no position (a visual latent's view jitter), a prediction can be close in the frame
-    and far in position. This term measures the error where the plan's value and guidance measure it.
-    Only a token's two end frames are read: they carry its offset (the error that makes plans jump at
-    token boundaries), and reading all ten through the visual estimator (2 x 512) tripled a dense step.
-    """
+    """Weighted MSE of each token's first and last frame's position as ``readout`` reads it, predicted vs true
+    (train.position_weight): where most of a frame's variance carries no position (a visual latent's view
+    jitter), a prediction close in the frame can be far in position. Only the two end frames are read: they
+    carry the token's offset, and reading all ten through the visual estimator tripled a dense step."""
     b, t, dd = x0.shape
     d = dd // frame_stack
     ends = lambda x: x.reshape(b, t, frame_stack, d)[:, :, [0, frame_stack - 1]]  # noqa: E731  [B, T, 2, d]
@@ -202,13 +186,9 @@ def make_loss(cfg: Config, device: torch.device, readout: Readout | None = None)
 
 
 def position_readout(cfg: Config, data: Any, device: torch.device) -> tuple[Readout | None, dict[str, Any]]:
-    """The data's position readout (frozen) when a lever needs it (train.boundary_space=position,
-    train.position_weight>0), and what the manifest records.
-
-    A data module offers ``position_readout(cfg) -> (readout, provenance)`` when its frames have a
-    position to read; asking for a position lever on data without one, or for the position space of a
-    boundary loss that is off, is one ConfigError before any training.
-    """
+    """The data's frozen position readout (``data.position_readout(cfg) -> (readout, provenance)``) when a lever
+    needs it (train.boundary_space=position, train.position_weight>0), and what the manifest records; a lever
+    the data or model cannot serve, or the position space of an off boundary loss, is one ConfigError."""
     tc = cfg.train
     if tc.boundary_space == "token" and not tc.position_weight:
         return None, {}
@@ -407,13 +387,6 @@ def update_ema(ema: torch.nn.Module, model: torch.nn.Module, decay: float, step:
 
 def _summary(step: int, wall: float, history: dict, out_dir: Path, model: DFTransformer,
              resumed_from: int | None) -> dict[str, Any]:
-    train_hist, val_hist = history["train"], history["val"]
-    return {
-        "step": step,
-        "wall_time_s": wall,
-        "final_losses": {"train": train_hist[-1][1] if train_hist else None,
-                         "val": val_hist[-1][1] if val_hist else None},
-        "param_count": model.num_params(),
-        "out_dir": str(out_dir),
-        "resumed_from": resumed_from,
-    }
+    last = {k: history[k][-1][1] if history[k] else None for k in ("train", "val")}
+    return {"step": step, "wall_time_s": wall, "final_losses": last, "param_count": model.num_params(),
+            "out_dir": str(out_dir), "resumed_from": resumed_from}

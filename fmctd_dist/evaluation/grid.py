@@ -1,11 +1,8 @@
 """The evaluation grid (tasks x seeds) for one (method, env): validate, resume, run, record.
 
-``prepare`` does every check a user can fail (config, device, checkpoint and its agreement
-with the config) in the job process, before any actor or episode starts; the runners then
-only skip keys that already have a row and write one Parquet file per finished episode. What the env
-family brings (episodes, plan rules, guide map) comes from the lookup the caller hands to :func:`prepare`
-(``hooks_for``: env name -> hook module, ``fmctd_dist.families.hooks_for``); :class:`Prepared` carries the
-hook module's functions, which pickle by reference, to the actors.
+``prepare`` does every check a user can fail in the job process, before any actor or episode starts; the
+runners then only skip keys that already have a row and write one Parquet file per finished episode.
+:class:`Prepared` carries the env family's hook functions (``hooks_for``), which pickle by reference.
 """
 
 from __future__ import annotations
@@ -23,9 +20,8 @@ from fmctd_dist.denoiser.runtime import check_compile
 from fmctd_dist.device import resolve_device, set_threads
 from fmctd_dist.diffusion.checkpoint import read_manifest, verify_checkpoint
 from fmctd_dist.errors import CheckpointError, ResultsError
-from fmctd_dist.evaluation.results import describe
 from fmctd_dist.evaluation.identity import config_hash, differences, identity_columns
-from fmctd_dist.evaluation.results import ResultStore
+from fmctd_dist.evaluation.results import ResultStore, describe
 from fmctd_dist.family import Episodes, HooksFor, PlanRules
 
 
@@ -80,12 +76,9 @@ def grid(cfg: Config) -> list[tuple[int, int]]:
 
 
 def missing(p: Prepared, store: ResultStore, log: Callable[[str], None] = print) -> list[tuple[int, int]]:
-    """The (task, seed) keys of the grid without a row: what a (re)run still has to do.
-
-    Refuses (ResultsError, before anything starts) when the run already holds rows of this
-    method and env from another config or checkpoint, listing what differs (docs/design.md §10: a run
-    directory never mixes them). Unreadable row files count as missing and are reported.
-    """
+    """The (task, seed) keys of the grid without a row (unreadable row files count as missing, reported); one
+    ResultsError listing what differs when the run holds rows of another config or checkpoint (docs/design.md
+    §10: a run directory never mixes them)."""
     cfg = p.cfg
     rows = store.rows(cfg.method.name, cfg.env.name)
     for line in store.report():

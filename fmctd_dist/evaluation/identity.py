@@ -76,12 +76,8 @@ def changed_fields(row: dict[str, Any], cfg: Config) -> dict[str, tuple[Any, Any
     (the row's value, ``cfg``'s value), each read against ``Config()``'s defaults where not recorded."""
     theirs, ours = json.loads(row.get("config_json") or "{}"), plan_config(cfg)
     default = plan_fields(Config())
-    out = {}
-    for key in sorted(set(theirs) | set(ours)):
-        a, b = theirs.get(key, default.get(key)), ours.get(key, default.get(key))
-        if a != b:
-            out[key] = (a, b)
-    return out
+    pairs = {k: (theirs.get(k, default.get(k)), ours.get(k, default.get(k))) for k in sorted(set(theirs) | set(ours))}
+    return {k: (a, b) for k, (a, b) in pairs.items() if a != b}
 
 
 def differences(row: dict[str, Any], cfg: Config, checkpoint_digest: str, policy_digest: str = "") -> list[str]:

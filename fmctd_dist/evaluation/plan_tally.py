@@ -63,12 +63,8 @@ class PlanTally:
     def add(self, out: PlanOutput) -> None:
         """Count one planner call."""
         self.plans += 1
-        self.plan_time_s += out.plan_time_s
-        self.denoise_time_s += out.denoise_time_s
-        self.denoise_call_s += out.denoise_call_s
-        self.expansions += out.expansions
-        self.iterations += out.iterations
-        self.retries += out.retries
+        for k in ("plan_time_s", "denoise_time_s", "denoise_call_s", "expansions", "iterations", "retries"):
+            setattr(self, k, getattr(self, k) + getattr(out, k))
         self.statuses.append(out.status)
 
     def columns(self) -> dict[str, Any]:

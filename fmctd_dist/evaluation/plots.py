@@ -10,7 +10,6 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 from matplotlib.ticker import FormatStrFormatter, LogLocator, MaxNLocator, NullFormatter  # noqa: E402
-import numpy as np  # noqa: E402
 
 from fmctd_dist.registry import env_names  # noqa: E402
 from fmctd_dist.evaluation.results import label  # noqa: E402

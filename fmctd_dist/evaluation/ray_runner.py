@@ -7,16 +7,11 @@
     PlannerDriver: owns the tree of each plan call (selection/backup are serial, here) and
                  shards every expansion/simulation batch over the shared denoiser actors
 
-Only the job process writes files and draws progress bars; actors return rows and timings.
-Errors raised on purpose inside actors (FmctdError) reach the user as themselves.
-
-Faults (docs/design.md §9; tests/test_ray_faults.py, tests/test_ray_multinode.py): a dead denoiser actor's
-micro-batches are re-routed (RayDenoiser); an episode whose EnvActor or PlannerDriver dies (killed,
-out of memory, its node gone) or is still running after ``ray.episode_timeout_s`` (alive but hung)
-left no row, so it is run again from the start on a new pair, up to ``ray.max_restarts`` times per
-episode; both count in the row's ``retries``. Plans are a pure
-function of (config, checkpoint, seed), so every row is the one a fault-free run writes. A stopped
-or killed job keeps the rows it wrote; rerunning it runs only the missing keys.
+Only the job process writes files and draws progress bars; actors return rows and timings, and
+errors raised on purpose inside actors (FmctdError) reach the user as themselves. Faults (docs/design.md
+§9): a dead denoiser actor's micro-batches are re-routed (RayDenoiser); an episode whose actors die or
+hang past ``ray.episode_timeout_s`` is re-run on a new pair (:func:`run_ray`). A stopped job keeps the
+rows it wrote; rerunning it runs only the missing keys.
 
 Python entry point (joins a running cluster, or ``ray.init()`` first yourself)::
 
@@ -45,11 +40,10 @@ from tqdm.auto import tqdm
 
 from fmctd_dist.artifacts import first_line
 from fmctd_dist.config import Config, load_config
-from fmctd_dist.denoiser.ray_pool import DenoiserPool, RayDenoiser, auto_actors, unwrap_ray_error
+from fmctd_dist.denoiser.ray_pool import DenoiserPool, RayDenoiser, auto_actors, kill_quietly, unwrap_ray_error, where
 from fmctd_dist.errors import ConfigError, DeviceError
-from fmctd_dist.evaluation.results import describe
 from fmctd_dist.evaluation.grid import Prepared, grid, missing, prepare, provenance
-from fmctd_dist.evaluation.results import ResultStore
+from fmctd_dist.evaluation.results import ResultStore, describe
 from fmctd_dist.family import HooksFor
 from fmctd_dist.planners.base import PlanOutput
 
@@ -90,7 +84,6 @@ class PlannerDriver:
         return None if r is None else r.tree
 
     def info(self) -> dict[str, Any]:
-        """Where this driver runs: pid and Ray node id (what a fault test kills)."""
         return where()
 
 
@@ -124,12 +117,7 @@ class EnvActor:
         return self.episodes.run(self.planner, task, seed)
 
     def info(self) -> dict[str, Any]:
-        """Where this env actor runs: pid and Ray node id (what a fault test kills)."""
         return where()
-
-
-def where() -> dict[str, Any]:
-    return {"pid": os.getpid(), "node_id": ray.get_runtime_context().get_node_id()}
 
 
 # What a dead actor, worker process or node looks like to its caller (not an error of the episode).
@@ -155,14 +143,6 @@ def episode_pair(p: Prepared, denoisers: list) -> tuple:
     return EnvActor.options(**opts).remote(p, driver), driver
 
 
-def kill_quietly(actors) -> None:
-    for a in actors:
-        try:
-            ray.kill(a, no_restart=True)
-        except Exception:  # noqa: BLE001 - already gone
-            pass
-
-
 def check_ray_config(p: Prepared) -> None:
     """Checks that need no cluster (run before ray.init)."""
     r = p.cfg.ray
@@ -174,13 +154,8 @@ def check_ray_config(p: Prepared) -> None:
 
 
 def pool_size(p: Prepared) -> tuple[int, int]:
-    """(denoiser actors, env actors) for the cluster we are connected to.
-
-    ``ray.denoiser_actors=0`` (the default) gives one actor per GPU (``ray.num_gpus`` each) or per
-    ``ray.num_cpus`` CPUs the cluster has, so no core sits idle; ``ray.env_actors=0`` runs ``eval.in_flight``
-    episodes at once per denoiser actor (one: more would queue on them; several: their jobs are pooled).
-    Explicit values win.
-    """
+    """(denoiser actors, env actors) for the connected cluster: ``ray.denoiser_actors=0`` is :func:`auto_actors`,
+    ``ray.env_actors=0`` runs ``eval.in_flight`` episodes at once per denoiser actor; explicit values win."""
     r = p.cfg.ray
     n = r.denoiser_actors or auto_actors(r)
     return n, r.env_actors or n * p.cfg.eval.in_flight
@@ -188,17 +163,13 @@ def pool_size(p: Prepared) -> tuple[int, int]:
 
 def check_cluster(p: Prepared, n_actors: int) -> None:
     """After ray.init, before any actor: the cluster must hold what the pool asks for."""
-    r = p.cfg.ray
-    res = ray.cluster_resources()
-    need_gpu = n_actors * r.num_gpus
-    if need_gpu > res.get("GPU", 0.0):
-        raise DeviceError(f"{n_actors} denoiser actor(s) x ray.num_gpus={r.num_gpus} need {need_gpu:g} GPU(s) "
-                          f"but the Ray cluster has {res.get('GPU', 0.0):g}; "
-                          f"lower ray.denoiser_actors or add GPU nodes")
-    need_cpu = n_actors * r.num_cpus
-    if need_cpu > res.get("CPU", 0.0):
-        raise DeviceError(f"{n_actors} denoiser actor(s) x ray.num_cpus={r.num_cpus} need {need_cpu:g} CPU(s) "
-                          f"but the Ray cluster has {res.get('CPU', 0.0):g}; lower ray.denoiser_actors or ray.num_cpus")
+    r, res = p.cfg.ray, ray.cluster_resources()
+    for kind, each, fix in (("GPU", r.num_gpus, "lower ray.denoiser_actors or add GPU nodes"),
+                            ("CPU", r.num_cpus, "lower ray.denoiser_actors or ray.num_cpus")):
+        need, have = n_actors * each, res.get(kind, 0.0)
+        if need > have:
+            raise DeviceError(f"{n_actors} denoiser actor(s) x ray.num_{kind.lower()}s={each} need {need:g} {kind}(s) "
+                              f"but the Ray cluster has {have:g}; {fix}")
 
 
 # Environment of a Ray cluster this process starts itself. Ray runs its workers at nice 15, so on
@@ -269,8 +240,9 @@ def run_ray(p: Prepared, store: ResultStore, progress: bool = True,
 
         def rerun(pair: tuple, key: tuple[int, int], why: str) -> None:
             """Its env actor or planner driver died (killed, OOM, node gone) or hung: the half-run episode
-            left no row, so run it again from the start on a new pair. A plan is a pure function of
-            (config, checkpoint, seed): the rerun's row is the one a fault-free run writes."""
+            left no row, so run it again from the start on a new pair, at most ray.max_restarts times (counted
+            in the row's ``retries``). A plan is a pure function of (config, checkpoint, seed): the rerun's
+            row is the one a fault-free run writes."""
             n = reruns[key] = reruns.get(key, 0) + 1
             if n > cfg.ray.max_restarts:
                 raise DeviceError(
@@ -322,13 +294,9 @@ def run_ray(p: Prepared, store: ResultStore, progress: bool = True,
 
 
 def evaluate(overrides: list[str] | Config, hooks_for: HooksFor, progress: bool = True) -> list[dict[str, Any]]:
-    """Evaluate on Ray and return one row per (task, seed) of the grid (resumed rows included).
-
-    ``overrides`` are the words of ``jobs/eval.py`` (``["method=fast-mctd", "tasks=[1]"]``) or a
-    Config; ``hooks_for``: env name -> its family's hook module (``fmctd_dist.families.hooks_for``).
-    The runner is Ray whatever ``eval.runner`` says. Joins the cluster ``ray.init()``
-    made (or a running one), else starts a local one for this call.
-    """
+    """Evaluate on Ray (whatever ``eval.runner`` says; a cluster as :func:`connect` finds one) and return one row
+    per (task, seed) of the grid, resumed rows included. ``overrides``: the words of ``jobs/eval.py`` or a
+    Config; ``hooks_for``: env name -> its family's hook module (``fmctd_dist.families.hooks_for``)."""
     cfg = overrides if isinstance(overrides, Config) else load_config(list(overrides))
     cfg = dataclasses.replace(cfg, eval=dataclasses.replace(cfg.eval, runner="ray"))
     p = prepare(cfg, hooks_for)

@@ -70,12 +70,8 @@ def row_key(r: dict[str, Any]) -> tuple:
 
 
 def merge_rows(committed: list[dict[str, Any]], fresh: list[dict[str, Any]], prefix: str = "") -> list[dict[str, Any]]:
-    """The committed rows (``docs/eval_rows.parquet``, kept in git) under ``prefix``, with every episode
-    that also has a fresh row in ``results/`` replaced by it.
-
-    ``results/`` is not in git, so a session on a fresh machine has only the rows it ran; merging
-    lets it add rows to the tables without dropping the ones earlier sessions measured.
-    """
+    """The committed rows (``docs/eval_rows.parquet``) under ``prefix``, each episode with a fresh row in
+    ``results/`` (not in git: a fresh machine has only its own) replaced by it."""
     merged = {row_key(r): r for r in committed if _in_run(r["run"], prefix)}
     merged.update((row_key(r), r) for r in fresh if _in_run(r["run"], prefix))
     return [merged[k] for k in sorted(merged)]
@@ -83,12 +79,8 @@ def merge_rows(committed: list[dict[str, Any]], fresh: list[dict[str, Any]], pre
 
 def superseded(committed: list[dict[str, Any]], fresh: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """The committed rows that a fresh row of the same episode replaces with another identity (new weights
-    at the same path, another config or time limit), renamed to run ``superseded/<run>@<config>-<ckpt>``.
-
-    A table re-run on retrained checkpoints writes to the same row files, so without this the archive
-    (``docs/eval_rows.parquet``) would silently drop the episodes earlier text quotes. Kept under their own
-    run name, they leave the re-run table (which shows today's rows only) and stay traceable.
-    """
+    at the same path, another config or time limit), renamed to run ``superseded/<run>@<config>-<ckpt>``, so
+    the archive (``docs/eval_rows.parquet``) keeps the episodes earlier text quotes, out of today's tables."""
     fresh_ids = {row_key(r): row_identity(r) for r in fresh}
     out = []
     for r in committed:
@@ -109,18 +101,13 @@ def _shares(s: dict[str, Any]) -> str:
 
 def current_rows(rows: list[dict[str, Any]],
                  hashes: dict[tuple[str, str], str]) -> tuple[list[dict[str, Any]], dict[tuple, int]]:
-    """The rows made with today's default config of their (method, env) (``hashes``: its config hash),
-    one per episode and checkpoint, and per (method, env, identity) how many episodes were left out
-    because their seed lacks a task.
+    """The rows made with today's default config of their (method, env) (``hashes``: its config hash), from
+    any run, one per episode and checkpoint, and per (method, env, identity) how many episodes were left out.
 
-    Cube rows come from many runs (a grid at seeds 0-1, then the rest; an ablation beside them), so
-    the robot table is not one run's: it is every episode whose config hash is the default's. An
-    episode held by several runs is taken from the run holding the most episodes of its group, so one
-    table line's planning times come from as few runs as possible. (The runs hold the same bits on one
-    machine; a long cube episode re-run on another CPU can differ, as MuJoCo's floating point does:
-    docs/results.md 12.8.2. The rule keeps the choice fixed either way.)
-    A seed counts only with every task of its group (a grid stopped part-way, tasks 1-2 of seeds 2-9,
-    would otherwise weigh those tasks more in the per-seed means).
+    An episode held by several runs is taken from the run holding the most episodes of its group, so a
+    line's planning times come from as few runs as possible (and the choice is fixed where re-runs differ:
+    docs/results.md 12.8.2). A seed counts only with every task of its group, so a grid stopped part-way
+    weighs no task more in the per-seed means.
     """
     mine = [(r, (r["method"], r["env"], row_identity(r))) for r in rows
             if r.get("config_hash") and hashes.get((r["method"], r["env"])) == r["config_hash"]]
@@ -214,15 +201,10 @@ def _glance_line(lines: list[dict[str, Any]], shipped: str | None) -> tuple[dict
 def glance_table(rows: list[dict[str, Any]], tables: list[Table],
                  shipped: dict[tuple[str, str], str] | None = None,
                  elsewhere: set[tuple[str, str]] | None = None) -> str:
-    """One cell per (method, env): our success % against the paper's, e.g. ``84 / 100``, from the same
-    lines as the full tables (:func:`paper_table`). ``rows``: those made with today's default config of
-    their (method, env) (:func:`current_rows`), so a cell is what today's defaults give. One column per env
-    of ``tables``; row i holds each table's i-th method and is named by them (a maze's ``mctd``, a cube's
-    ``mctd-replan``). A (method, env) with several lines
-    shows the one on today's weights with the most episodes; ``†`` marks a cell whose lines are all on
-    replaced weights, ``(n)`` a line of fewer than 50 episodes, ``‡`` a (method, env) in ``elsewhere``:
-    run only at other settings. For reading at a glance only: the full tables say which config, seeds and
-    planning times each number has."""
+    """One cell per (method, env) of ``rows`` (:func:`current_rows`): our success % against the paper's, e.g.
+    ``84 / 100``, from the line :func:`_glance_line` picks; row i holds each table's i-th method. ``†`` marks
+    a cell whose lines are all on replaced weights, ``(n)`` a line of fewer than 50 episodes, ``‡`` a (method,
+    env) in ``elsewhere``: run only at other settings."""
     key = _lines(rows)
     columns = {env: t.methods for t in tables for env in t.envs}
     short = [name for t in tables for name in (t.columns or t.envs)]

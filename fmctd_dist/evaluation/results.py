@@ -8,6 +8,7 @@ keys that exist: nothing lost, nothing duplicated. Only the job process writes h
 from __future__ import annotations
 
 import os
+from collections import Counter
 from pathlib import Path
 from typing import Any
 
@@ -91,9 +92,7 @@ def summarise(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     groups: dict[tuple, list[dict[str, Any]]] = {}
     for r in rows:
         groups.setdefault((r["method"], r["env"], row_identity(r)), []).append(r)
-    variants: dict[tuple[str, str], int] = {}
-    for method, env, _ in groups:
-        variants[(method, env)] = variants.get((method, env), 0) + 1
+    variants = Counter((method, env) for method, env, _ in groups)
     out = []
     for (method, env, ident), rs in sorted(groups.items(), key=lambda kv: (kv[0][0], kv[0][1], -len(kv[1]),
                                                                            str(kv[0][2]))):

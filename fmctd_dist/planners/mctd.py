@@ -2,7 +2,7 @@
 
 K (``method.parallel``), w, RAS, leaf parallelisation and H (``jump``, which also picks the
 sparse checkpoint) are config, read once by :func:`fmctd_dist.planners.make_planner`; this class only wires the
-schedule, codec and denoiser into :func:`fmctd_dist.search.search`, with the action set and plan value the env
+schedule, codec and denoiser into :func:`fmctd_dist.search.loop.search`, with the action set and plan value the env
 family's plan rules give for each call (handed in by the caller), and expands a sparse plan to one waypoint per
 env step.
 """
@@ -35,16 +35,8 @@ class MCTDPlanner:
         r = search(self.denoiser, self.schedule, self.codec, start, goal, self.params, seed,
                    actions=actions, value=value)
         self.last_result = r
-        return PlanOutput(
-            waypoints=repeat_waypoints(r.plan, self.jump),
-            status=r.status,
-            plan_time_s=time.perf_counter() - t0,
-            denoise_time_s=r.denoise_time_s,
-            expansions=r.expansions,
-            iterations=r.iterations,
-            denoise_calls=r.denoise_calls,
-            retries=r.retries,
-            timed_out=r.timed_out,
-            denoise_call_s=r.denoise_call_s,
-            extra={"stop_reason": r.stop_reason, "value": float(r.value)},
-        )
+        same = ("status", "denoise_time_s", "expansions", "iterations", "denoise_calls", "retries", "timed_out",
+                "denoise_call_s")
+        return PlanOutput(waypoints=repeat_waypoints(r.plan, self.jump), plan_time_s=time.perf_counter() - t0,
+                          extra={"stop_reason": r.stop_reason, "value": float(r.value)},
+                          **{k: getattr(r, k) for k in same})

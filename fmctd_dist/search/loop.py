@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import TYPE_CHECKING, Callable
 
 import numpy as np
@@ -69,26 +69,15 @@ class SearchParams:
                              f"guidance_scales={self.guidance_scales} bad_plan_tries={self.bad_plan_tries}")
 
     @classmethod
-    def from_method(
-        cls, method: "MethodConfig", *, time_limit_s: float = 0.0, clip_noise: float = 20.0
-    ) -> "SearchParams":
-        """From a MethodConfig (time limit and noise clip live in eval/diffusion configs)."""
-        return cls(
-            parallel=int(method.parallel),
-            virtual_weight=float(method.virtual_weight),
-            redundancy_aware=bool(method.redundancy_aware),
-            leaf_parallel=bool(method.leaf_parallel),
-            guidance_scales=tuple(float(s) for s in method.guidance_scales),
-            budget=int(method.budget),
-            warp_threshold=float(method.warp_threshold),
-            goal_radius=float(method.goal_radius),
-            bad_plan_tries=int(method.bad_plan_tries),
-            bad_plan_step=float(method.bad_plan_step),
-            uct_c=float(method.uct_c),
-            early_stop=bool(method.early_stop),
-            time_limit_s=float(time_limit_s),
-            clip_noise=float(clip_noise),
-        )
+    def from_method(cls, method: "MethodConfig", *, time_limit_s: float = 0.0,
+                    clip_noise: float = 20.0) -> "SearchParams":
+        """From a MethodConfig (time limit and noise clip live in eval/diffusion configs), cast to each field's type."""
+        def cast(default: object, v: object) -> object:
+            return tuple(float(s) for s in v) if isinstance(default, tuple) else type(default)(v)
+
+        given = {"time_limit_s": time_limit_s, "clip_noise": clip_noise}
+        return cls(**{f.name: cast(f.default, given[f.name] if f.name in given else getattr(method, f.name))
+                      for f in fields(cls)})
 
 
 @dataclass
@@ -126,9 +115,8 @@ class SearchResult:
     stats: list[IterStats] = field(default_factory=list)
 
 
-def initial_noise(
-    plan_seed: int, node: int, attempt: int, copy: int, shape: tuple[int, ...], clip: float
-) -> np.ndarray:
+def initial_noise(plan_seed: int, node: int, attempt: int, copy: int, shape: tuple[int, ...],
+                  clip: float) -> np.ndarray:
     """Clipped standard-normal float32 noise for one depth-1 job, a pure function of its key."""
     key = [plan_seed, node, attempt] + ([copy] if copy else [])
     z = np.random.default_rng(np.random.SeedSequence(key)).standard_normal(shape)
@@ -150,14 +138,10 @@ class _Runner:
 
     def __call__(self, x: np.ndarray, levels: np.ndarray, acts: Actions) -> np.ndarray:
         b = x.shape[0]
-        batch = DenoiseBatch(
-            x=np.ascontiguousarray(x, np.float32),
-            levels=levels,
-            scale=acts.scale.astype(np.float32),
-            start=np.repeat(self.start_n[None], b, 0),
-            goal=np.repeat(self.goal_n[None], b, 0),
-            guide_mask=None if acts.mask is None else np.ascontiguousarray(acts.mask, np.float32),
-        )
+        mask = None if acts.mask is None else np.ascontiguousarray(acts.mask, np.float32)
+        batch = DenoiseBatch(x=np.ascontiguousarray(x, np.float32), levels=levels, scale=acts.scale.astype(np.float32),
+                             start=np.repeat(self.start_n[None], b, 0), goal=np.repeat(self.goal_n[None], b, 0),
+                             guide_mask=mask)
         t0 = self.clock()
         res = self.denoiser.denoise(batch)
         self.call_s += self.clock() - t0
@@ -194,19 +178,9 @@ class _Fallbacks:
         return STATUS_STAY, 0.0, np.repeat(start[None].astype(np.float32), max(frames, 1), axis=0)
 
 
-def search(
-    denoiser: Denoiser,
-    schedule: PyramidSchedule,
-    codec: PlanCodec,
-    start: np.ndarray,
-    goal: np.ndarray,
-    params: SearchParams,
-    plan_seed: int,
-    *,
-    actions: Actions | None = None,
-    value: PlanValue | None = None,
-    clock: Callable[[], float] = time.perf_counter,
-) -> SearchResult:
+def search(denoiser: Denoiser, schedule: PyramidSchedule, codec: PlanCodec, start: np.ndarray, goal: np.ndarray,
+           params: SearchParams, plan_seed: int, *, actions: Actions | None = None, value: PlanValue | None = None,
+           clock: Callable[[], float] = time.perf_counter) -> SearchResult:
     """Plan from ``start`` [d] to ``goal`` [d] (world units); see the module docstring.
 
     ``actions``: the child slots (default: one per ``params.guidance_scales``, every dim
@@ -315,20 +289,7 @@ def search(
         status_out, value_out, plan = EARLY_STOP, early[0], early[1]
     else:
         status_out, value_out, plan = fallback.pick(start, frames - 1)
-    return SearchResult(
-        plan=plan,
-        status=status_out,
-        value=value_out,
-        expansions=expansions,
-        iterations=iterations,
-        denoise_calls=run.calls,
-        denoise_time_s=run.time_s,
-        wall_time_s=clock() - t0,
-        timed_out=timed_out,
-        stop_reason=stop_reason,
-        tree=tree,
-        retries=run.retries,
-        resampled=resampled,
-        denoise_call_s=run.call_s,
-        stats=stats,
-    )
+    return SearchResult(plan=plan, status=status_out, value=value_out, expansions=expansions, iterations=iterations,
+                        denoise_calls=run.calls, denoise_time_s=run.time_s, wall_time_s=clock() - t0,
+                        timed_out=timed_out, stop_reason=stop_reason, tree=tree, retries=run.retries,
+                        resampled=resampled, denoise_call_s=run.call_s, stats=stats)

@@ -67,14 +67,8 @@ def claimable(tree: Tree, node: int, redundancy_aware: bool) -> np.ndarray:
     return free & ~tree.claimed[node] if redundancy_aware else free
 
 
-def descend(
-    tree: Tree,
-    rng: np.random.Generator,
-    c: float,
-    w: float,
-    redundancy_aware: bool,
-    leaf_parallel: bool,
-) -> tuple[int, int] | None:
+def descend(tree: Tree, rng: np.random.Generator, c: float, w: float, redundancy_aware: bool,
+            leaf_parallel: bool) -> tuple[int, int] | None:
     """One descent from the root (docs/reference.md §3 step 1); returns (parent, slot) or None if wasted.
 
     Walks down while the node has nothing claimable, is not terminal and has every slot
@@ -106,16 +100,8 @@ def open_slots(tree: Tree) -> int:
     return int(np.sum(free[live]))
 
 
-def select_batch(
-    tree: Tree,
-    k: int,
-    rng: np.random.Generator,
-    *,
-    c: float = math.sqrt(2.0),
-    w: float = 1.0,
-    redundancy_aware: bool = True,
-    leaf_parallel: bool = False,
-) -> Candidates:
+def select_batch(tree: Tree, k: int, rng: np.random.Generator, *, c: float = math.sqrt(2.0), w: float = 1.0,
+                 redundancy_aware: bool = True, leaf_parallel: bool = False) -> Candidates:
     """Up to ``k`` descents with delayed update; clears the claim mask first.
 
     Stops early once no unclaimed empty slot is left anywhere (with redundancy-aware
@@ -124,8 +110,7 @@ def select_batch(
     tree.claimed[:] = False
     parents: list[int] = []
     slots: list[int] = []
-    wasted = 0
-    attempts = 0
+    wasted = attempts = 0
     remaining = open_slots(tree)
     while attempts < k and remaining > 0:
         attempts += 1

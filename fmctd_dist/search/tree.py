@@ -53,58 +53,24 @@ class Tree:
     def to_json(self) -> dict[str, Any]:
         """Plain-list view of the used rows (payloads left out), floats rounded to 6 decimals."""
         n = self.num_nodes
-
-        def ints(a: np.ndarray) -> list:
-            return a[:n].astype(np.int64).tolist()
-
-        def floats(a: np.ndarray) -> list:
-            return [round(float(v), 6) for v in a[:n]]
-
-        return {
-            "num_nodes": n,
-            "terminal_depth": int(self.terminal_depth),
-            "parent": ints(self.parent),
-            "slot": ints(self.slot),
-            "depth": ints(self.depth),
-            "children": ints(self.children),
-            "visits": ints(self.visits),
-            "virtual": floats(self.virtual),
-            "value": floats(self.value),
-            "status": ints(self.status),
-            "born": ints(self.born),
-            "attempts": ints(self.attempts),
-        }
+        out: dict[str, Any] = {"num_nodes": n, "terminal_depth": int(self.terminal_depth)}
+        for name in ("parent", "slot", "depth", "children", "visits", "virtual", "value", "status", "born", "attempts"):
+            a = getattr(self, name)[:n]
+            out[name] = [round(float(v), 6) for v in a] if name in ("virtual", "value") else a.astype(np.int64).tolist()
+        return out
 
 
-def empty_tree(
-    capacity: int,
-    num_actions: int,
-    tokens: int,
-    token_dim: int,
-    plan_frames: int,
-    terminal_depth: int,
-    pos_dim: int = 2,
-) -> Tree:
+def empty_tree(capacity: int, num_actions: int, tokens: int, token_dim: int, plan_frames: int,
+               terminal_depth: int, pos_dim: int = 2) -> Tree:
     """A tree holding only the root. ``capacity`` >= 1 + budget + K bounds the node count."""
     n, a = capacity, num_actions
-    tree = Tree(
-        parent=np.full(n, EMPTY, np.int32),
-        slot=np.full(n, EMPTY, np.int32),
-        depth=np.zeros(n, np.int32),
-        children=np.full((n, a), EMPTY, np.int32),
-        visits=np.zeros(n, np.int32),
-        virtual=np.zeros(n, np.float64),
-        value=np.zeros(n, np.float64),
-        claimed=np.zeros((n, a), bool),
-        status=np.full(n, NO_STATUS, np.int8),
-        born=np.full(n, -1, np.int32),
-        attempts=np.zeros(n, np.int32),
-        x=np.zeros((n, tokens, token_dim), np.float32),
-        sim_plan=np.zeros((n, plan_frames, pos_dim), np.float32),
-        terminal_depth=int(terminal_depth),
-        num_nodes=1,
-    )
-    return tree
+    return Tree(parent=np.full(n, EMPTY, np.int32), slot=np.full(n, EMPTY, np.int32), depth=np.zeros(n, np.int32),
+                children=np.full((n, a), EMPTY, np.int32), visits=np.zeros(n, np.int32),
+                virtual=np.zeros(n, np.float64), value=np.zeros(n, np.float64), claimed=np.zeros((n, a), bool),
+                status=np.full(n, NO_STATUS, np.int8), born=np.full(n, -1, np.int32),
+                attempts=np.zeros(n, np.int32), x=np.zeros((n, tokens, token_dim), np.float32),
+                sim_plan=np.zeros((n, plan_frames, pos_dim), np.float32), terminal_depth=int(terminal_depth),
+                num_nodes=1)
 
 
 @dataclass(frozen=True)
@@ -141,26 +107,12 @@ def assign_ids(tree: Tree, parents: np.ndarray, slots: np.ndarray) -> Assignment
     copy = np.arange(p.shape[0]) - start_of_group
     if node.size and node.max() >= tree.capacity:
         raise ValueError(f"tree capacity {tree.capacity} exceeded (need node {int(node.max())})")
-    return Assignment(
-        order=order,
-        parent=p.astype(np.int32),
-        slot=s.astype(np.int32),
-        node=node.astype(np.int32),
-        copy=copy.astype(np.int32),
-        new_nodes=np.unique(node).astype(np.int32),
-    )
+    return Assignment(order=order, parent=p.astype(np.int32), slot=s.astype(np.int32), node=node.astype(np.int32),
+                      copy=copy.astype(np.int32), new_nodes=np.unique(node).astype(np.int32))
 
 
-def add_nodes(
-    tree: Tree,
-    assignment: Assignment,
-    x: np.ndarray,
-    value: np.ndarray,
-    status: np.ndarray,
-    sim_plan: np.ndarray,
-    attempts: np.ndarray,
-    iteration: int,
-) -> None:
+def add_nodes(tree: Tree, assignment: Assignment, x: np.ndarray, value: np.ndarray, status: np.ndarray,
+              sim_plan: np.ndarray, attempts: np.ndarray, iteration: int) -> None:
     """Write a batch's results into the tree (per-job arrays in job order).
 
     x: [J, T, D], value: [J], status: [J], sim_plan: [J, F, d], attempts: [J].

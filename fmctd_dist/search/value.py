@@ -13,17 +13,10 @@ import numpy as np
 NOT_REACHED = 0  # never within goal_radius, no warp before the end: value 0
 ACHIEVED = 1  # within goal_radius at reach_t with no warp up to and including reach_t
 WARP = 2  # a step longer than warp_threshold (or, with a wall test, through a wall) before reaching: value 0
-STATUS_NAMES = {NOT_REACHED: "not_reached", ACHIEVED: "achieved", WARP: "warp"}
 
 
-def plan_values(
-    plans: np.ndarray,
-    start: np.ndarray,
-    goal: np.ndarray,
-    warp_threshold: float,
-    goal_radius: float = 2.0,
-    blocked: np.ndarray | None = None,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def plan_values(plans: np.ndarray, start: np.ndarray, goal: np.ndarray, warp_threshold: float, goal_radius: float = 2.0,
+                blocked: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Score plans [B, F, d] (world units) from ``start`` [d] towards ``goal`` [d].
 
     ``blocked`` [B, F'] bool (optional; not the paper's): the step at t crosses a wall. Such a step

@@ -212,11 +212,7 @@ def make_cube_dataset(cfg: Config, progress: bool = True) -> tuple[Path, dict[st
     splits, sha, (mean, std) = write_splits(tmp, cfg, generate, cols)
     ogbench = OGBENCH_EPISODES[kind]
     manifest = {
-        "generator_version": CUBE_GENERATOR_VERSION,
-        "env": cfg.env.name,
-        "seed": cfg.data.seed,
-        "noise": cfg.data.noise,
-        "episode_steps": cfg.data.episode_steps,
+        **params,  # what the parts were made with
         "episodes": splits,
         "ogbench_episodes": {"train": ogbench, "val": ogbench // 10},
         "fraction_of_ogbench": round(cfg.data.episodes / ogbench, 4),

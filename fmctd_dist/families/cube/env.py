@@ -40,7 +40,6 @@ SUCCESS_RADIUS = 0.04 * XYZ_SCALE  # OGBench: every cube within 0.04 m of its go
 ARM_DIM = 19  # obs numbers before the first cube
 CUBE_OBS = 9  # obs numbers per cube: xyz, quaternion, yaw cos/sin
 ACT_DIM = 5  # effector dx, dy, dz (x 0.05 m), dyaw (x 0.3 rad), gripper
-STEP_LIMITS = {"single": 200, "double": 500, "triple": 1000}  # OGBench's max_episode_steps
 TASK_IDS = (1, 2, 3, 4, 5)
 
 

@@ -15,6 +15,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from fmctd_dist.evaluation.plots import save_figure  # noqa: E402
+
 COLOURS = ("tab:blue", "tab:orange", "tab:green", "tab:purple")
 
 
@@ -46,8 +48,4 @@ def plot_cube_episode(row: dict[str, Any], path: Path) -> Path:
     outcome = "success" if row["success"] else f"failure ({row.get('why_failed', '')})"
     fig.suptitle(f"{row['method']} {row['env']} task {row['task']} seed {row['seed']}: {outcome}, "
                  f"{row['plan_time_s']:.1f}s planning, targets {row.get('targets', '')}", fontsize=9)
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)

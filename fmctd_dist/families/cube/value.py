@@ -40,7 +40,6 @@ from fmctd_dist.search.actions import Actions
 from fmctd_dist.search.value import ACHIEVED, NOT_REACHED, WARP
 
 PARTIAL = 3  # not every cube placed; value 0.1 per cube placed at the plan's end
-STATUS_NAMES = {NOT_REACHED: "not_reached", ACHIEVED: "achieved", WARP: "warp", PARTIAL: "partial"}
 
 TABLE_Z = 0.2  # obs units: centre height of a cube resting on the table
 LEVEL = 0.4  # obs units: one stack level (cube width 0.04 m x 10)

@@ -26,9 +26,10 @@ from fmctd_dist.config import Config, resolve_path
 from fmctd_dist.families.maze.data import dataset_dir, load_dataset
 from fmctd_dist.data.manifest_io import read_manifest_json
 from fmctd_dist.data.npz import load_npz, save_npz
-from fmctd_dist.families.visual.frame_sets import STREAM, _shown, episode_subset, point_config, render_info
+from fmctd_dist.families.visual.frame_sets import STREAM, episode_subset, point_config, render_info
 from fmctd_dist.families.visual.env import IMAGE_SIZE, FrameRenderer
 from fmctd_dist.errors import DatasetError
+from fmctd_dist.hints import shown
 from fmctd_dist.families.visual.config import PartsConfig
 
 EPISODES_VERSION = 1
@@ -96,7 +97,7 @@ def make_episodes(cfg: Config, pcfg: PartsConfig, progress: bool = True) -> tupl
                               f"delete {out} and rerun")["images"].tobytes())
     manifest = {"version": EPISODES_VERSION, "env": cfg.env.name, "frames_seed": cfg.visual.frames_seed,
                 "episodes": ids["train"].tolist(), "val_episodes": ids["val"].tolist(), "episode_steps": steps,
-                "dataset": {"path": _shown(data.path), "digest": data.digest,
+                "dataset": {"path": shown(data.path), "digest": data.digest,
                             "val_digest": data.manifest["sha256"]["val"]},
                 "render": info, "frames_digest": h.hexdigest(),
                 "generation": {"rendered_frames": rendered, "wall_s": round(wall, 2),

@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 from tqdm.auto import tqdm
 
-from fmctd_dist.config import REPO_ROOT, Config, resolve_path
+from fmctd_dist.config import Config, resolve_path
 from fmctd_dist.artifacts import sha256_file
 from fmctd_dist.families.maze.data import SPLITS, NavigateDataset, load_dataset
 from fmctd_dist.data.manifest_io import read_manifest_json
@@ -37,6 +37,7 @@ from fmctd_dist.data.npz import load_npz, save_npz
 from fmctd_dist.families.visual.env import (CAMERA, CAMERA_POS, CAMERA_XYAXES, IMAGE_SIZE, FrameRenderer,
                                               point_env_name)
 from fmctd_dist.errors import ConfigError, DatasetError
+from fmctd_dist.hints import shown  # relative paths: manifests read the same on every checkout
 
 FRAMES_VERSION = 2  # 2: validation frames beside the train ones
 CHUNK = 100  # frames per progress-bar step
@@ -87,14 +88,6 @@ def episode_frames(cfg: Config, data: NavigateDataset, renderer: FrameRenderer):
     """
     for e in episode_subset(cfg):
         yield int(e), renderer.render(data.train[e].astype(np.float64))
-
-
-def _shown(path: Path) -> str:
-    """``path`` relative to the repo root when inside it (manifests then read the same on every checkout)."""
-    try:
-        return str(path.resolve().relative_to(REPO_ROOT))
-    except ValueError:
-        return str(path)
 
 
 def render_info(renderer: FrameRenderer) -> dict[str, Any]:
@@ -157,7 +150,7 @@ def make_frames(cfg: Config, progress: bool = True) -> tuple[Path, dict[str, Any
         "frames_seed": cfg.visual.frames_seed, "frames": len(index["train"]), "val_frames": n_val,
         "frame_index": index["train"].tolist(),  # flat: episode * episode_steps + step, train split
         "val_frame_index": index["val"].tolist(),  # the same over the validation split's episodes
-        "dataset": {"path": _shown(data.path), "digest": data.digest, "val_digest": data.manifest["sha256"]["val"],
+        "dataset": {"path": shown(data.path), "digest": data.digest, "val_digest": data.manifest["sha256"]["val"],
                     "seed": cfg.data.seed, "episodes": episodes, "val_episodes": data.val.shape[0],
                     "episode_steps": steps},
         "render": info, "sha256": sha256_file(tmp / "frames.npz"),

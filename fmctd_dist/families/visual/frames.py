@@ -14,7 +14,8 @@ import numpy as np
 
 from fmctd_dist.config import Config
 from fmctd_dist.data.npz import load_npz
-from fmctd_dist.families.visual.frame_sets import _shown, frames_dir, load_frames
+from fmctd_dist.families.visual.frame_sets import frames_dir, load_frames
+from fmctd_dist.hints import shown
 
 
 @dataclass
@@ -33,7 +34,7 @@ class FrameSet:
     def record(self) -> dict[str, Any]:
         """What a part's manifest says about the frames it was trained on."""
         m = self.manifest
-        return {"path": _shown(self.path), "sha256": m["sha256"], "frames": m["frames"], "val_frames": m["val_frames"],
+        return {"path": shown(self.path), "sha256": m["sha256"], "frames": m["frames"], "val_frames": m["val_frames"],
                 "frames_seed": m["frames_seed"], "shadowsize": m["render"]["shadowsize"],
                 "dataset_digest": m["dataset"]["digest"], "dataset_val_digest": m["dataset"]["val_digest"]}
 

@@ -27,7 +27,7 @@ from fmctd_dist.artifacts import sha256_file
 from fmctd_dist.config import Config, resolve_path
 from fmctd_dist.data.manifest_io import read_manifest_json
 from fmctd_dist.data.npz import load_npz, save_npz
-from fmctd_dist.families.visual.frame_sets import _shown
+from fmctd_dist.hints import shown
 from fmctd_dist.errors import DatasetError
 from fmctd_dist.families.visual.config import PartsConfig, part_dir
 from fmctd_dist.families.visual.episodes import load_episode, make_episodes
@@ -94,8 +94,8 @@ def make_latents(cfg: Config, pcfg: PartsConfig, progress: bool = True,
     save_npz(tmp / "latents.npz", arrays)
     manifest = {"version": LATENTS_VERSION, "env": cfg.env.name, "latent_dim": vae.latent_dim,
                 "episodes": list(em["episodes"]), "val_episodes": list(em["val_episodes"]), "episode_steps": steps,
-                "frames": total, "vae": {"path": _shown(vae.path), "digest": vae.digest},
-                "frames_dir": _shown(ep_dir), "frames_digest": em["frames_digest"], "dataset": em["dataset"],
+                "frames": total, "vae": {"path": shown(vae.path), "digest": vae.digest},
+                "frames_dir": shown(ep_dir), "frames_digest": em["frames_digest"], "dataset": em["dataset"],
                 "render": {k: em["render"].get(k) for k in ("camera", "shadowsize", "mujoco", "ogbench", "gl")},
                 "sha256": sha256_file(tmp / "latents.npz"),
                 "generation": {"encode_wall_s": round(wall, 2), "render": em["generation"]}}
