@@ -71,7 +71,8 @@ def main(argv: list[str]) -> int:
                           + ([setting] if setting else []))
         manifest = read_manifest(cfg.checkpoint_dir())
         denoiser = LocalDenoiser.from_checkpoint(cfg.checkpoint_dir(), cfg, guide_map=guide_map(cfg.env.name))
-        planner = make_planner(cfg, denoiser, normaliser_from_manifest(manifest), hooks_for(cfg.env.name).plan_rules(cfg))
+        rules = hooks_for(cfg.env.name).plan_rules(cfg)
+        planner = make_planner(cfg, denoiser, normaliser_from_manifest(manifest), rules)
         tally, seconds = [], 0.0
         for k, (a, b) in enumerate(pairs):
             start, goal = geo.cell_to_xy(a), geo.cell_to_xy(b)
