@@ -49,7 +49,7 @@ from fmctd_dist.errors import ConfigError
 
 
 # run-name prefixes whose rows are archived in docs/eval_rows.parquet without a regenerated table
-ARCHIVED = ("cube-", "visual-", "pool", "recipe-", "s10-", "s32-bg", "campaign-", "wall-test", "side-", "superseded/")
+ARCHIVED = ("cube-", "visual-", "pool", "recipe-", "s10-", "s32-bg", "campaign-", "wall-", "side-", "superseded/")
 # per-step arrays left out of the archive (git keeps the scalars; results/ keeps the rest)
 TRAJECTORIES = ("plan_xy", "traj_xy", "plan_cubes", "traj_cubes", "traj_effector")
 

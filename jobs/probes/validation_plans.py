@@ -4,7 +4,8 @@ For choosing a planner setting without looking at the evaluation tasks (e.g. ``m
 config plans once from each of N random pairs of free cells (seeded; the tasks' own pairs are left out, both
 ways round; BFS distance at least half the tasks' shortest) and the plan counts as a success when it is valid
 (no step over ``method.warp_threshold``, no step through a wall) and comes within ``method.goal_radius`` of the
-goal. No robot runs: this scores what the search hands the controller.
+goal (the warp test stops at the first waypoint within the radius, as the value's does). No robot runs: this
+scores what the search hands the controller.
 
     python jobs/probes/validation_plans.py env=antmaze-large method=fast-mctd pairs=20 \
         'settings=[method.wall_guidance=0, method.wall_guidance=0.3]'
@@ -44,14 +45,18 @@ def validation_pairs(geo: MazeGeometry, n: int, seed: int = 0) -> list[tuple[tup
 
 def plan_success(waypoints: np.ndarray, start: np.ndarray, goal: np.ndarray, jump: int, warp: float,
                  radius: float, geo: MazeGeometry) -> tuple[bool, bool]:
-    """(valid, reaches) of one plan: its coarse path from the start has no warp and crosses no wall; a coarse
-    waypoint lies within ``radius`` of the goal."""
+    """(valid, reaches) of one plan, as the value reads it plus the wall test: its coarse path from the start
+    up to the first waypoint within ``radius`` of the goal (all of it if none) has no step over ``warp``, and
+    that path, with the step on to the goal the planner appends, crosses no wall."""
     coarse = np.asarray(waypoints)[::jump, :2]
     if len(coarse) == 0:
         return False, False
-    path = np.concatenate([start[None], coarse])
-    valid = bool(np.linalg.norm(np.diff(path, axis=0), axis=-1).max() <= warp and geo.path_in_free(path))
-    return valid, bool((np.linalg.norm(coarse - goal, axis=-1) < radius).any())
+    near = np.linalg.norm(coarse - goal, axis=-1) < radius
+    head = coarse[: int(near.argmax()) + 1] if near.any() else coarse
+    path = np.concatenate([start[None], head])
+    no_warp = np.linalg.norm(np.diff(path, axis=0), axis=-1).max() <= warp
+    walk = np.concatenate([path, goal[None]]) if near.any() else path
+    return bool(no_warp and geo.path_in_free(walk)), bool(near.any())
 
 
 def main(argv: list[str]) -> int:

@@ -1,0 +1,45 @@
+"""jobs/probes/validation_plans.py: validation pairs leave the evaluation tasks out; a plan's success as the value
+reads it, plus the wall test."""
+
+from __future__ import annotations
+
+import numpy as np
+from conftest import load_job
+
+from fmctd_dist.families.maze.geometry import MazeGeometry, Task
+
+# a 4 x 5 maze: a U of free cells around the wall cell (1, 2)
+WALLS = np.array([[1, 1, 1, 1, 1], [1, 0, 1, 0, 1], [1, 0, 0, 0, 1], [1, 1, 1, 1, 1]])
+XY = MazeGeometry.cell_to_xy
+
+
+def geometry() -> MazeGeometry:
+    task = Task(1, (1, 1), (1, 3), XY((1, 1)), XY((1, 3)))
+    return MazeGeometry("toy", WALLS, (task,) * 5)
+
+
+def test_pairs_avoid_the_tasks_and_short_hops():
+    job = load_job("validation_plans")
+    geo = geometry()
+    pairs = job.validation_pairs(geo, 12, seed=1)
+    assert len(pairs) == 12
+    assert all({a, b} != {(1, 1), (1, 3)} and geo.bfs(b)[a] >= 2 for a, b in pairs)
+    assert pairs == job.validation_pairs(geo, 12, seed=1)  # seeded
+
+
+def test_a_plan_through_the_wall_reaches_but_is_not_valid():
+    job = load_job("validation_plans")
+    geo = geometry()
+    start, goal = XY((1, 1)), XY((1, 3))
+    straight = np.linspace(start, goal, 9)[1:]  # through the wall cell (1, 2), steps of 1
+    assert job.plan_success(straight, start, goal, 1, 1.5, 2.0, geo) == (False, True)
+    around = np.concatenate([np.linspace(start, XY((2, 1)), 5)[1:], np.linspace(XY((2, 1)), XY((2, 3)), 9)[1:],
+                             np.linspace(XY((2, 3)), goal, 5)[1:]])
+    assert job.plan_success(around, start, goal, 1, 1.5, 2.0, geo) == (True, True)
+    # the planner's last step, from the reach frame on to the goal, may be longer than the warp threshold
+    up = np.linspace(XY((2, 3)), goal, 9)[1:]  # steps of 0.5
+    reached = np.concatenate([np.linspace(start, XY((2, 1)), 9)[1:], np.linspace(XY((2, 1)), XY((2, 3)), 17)[1:],
+                              up[:5], goal[None]])  # the reach frame is 1.5 from the goal, then the goal itself
+    assert job.plan_success(reached, start, goal, 1, 1.0, 2.0, geo) == (True, True)
+    assert job.plan_success(np.repeat(around, 5, axis=0), start, goal, 5, 1.5, 2.0, geo) == (True, True)  # sparse
+    assert job.plan_success(around[:6], start, goal, 1, 1.5, 2.0, geo) == (True, False)  # valid, short of the goal
