@@ -201,3 +201,22 @@ def test_plan_identical_local_and_two_actors_under_bf16_and_compile(tiny_checkpo
 
     from fmctd_dist.device import bf16_warning
     assert [i["warning"] for i in pool.infos] == [bf16_warning(torch.device("cpu"), "diffusion.precision")] * 2
+
+
+def test_plan_identical_local_and_two_actors_with_wall_guidance(prepared, tiny_checkpoint, pools):
+    """The maze's wall term travels to the actors as the family's guide map (method.wall_guidance) and changes
+    the plan, with the same bits in process and over 2 actors."""
+    args, _ = tiny_checkpoint
+    prep = prepare(load_config(args + SEARCH + ["method.wall_guidance=1"]), hooks_for)
+    den = LocalDenoiser.from_checkpoint(prep.checkpoint, prep.cfg, expect_digest=prep.checkpoint_digest,
+                                        guide_map=prep.guide_map)
+    ref = plan_with(prep, den)
+    assert den.guide_map is not None
+    assert not np.array_equal(ref[1].x[:ref[1].num_nodes], local_plan(prepared)[1].x[:ref[1].num_nodes])
+    pools.release()
+    pool = DenoiserPool.create(prep, 2)
+    try:
+        got = plan_with(prep, pool.denoiser())
+    finally:
+        pool.shutdown()
+    assert_same(got, ref)
