@@ -13,15 +13,16 @@ from fmctd_dist.diffusion.sampler import goal_reward
 from fmctd_dist.errors import ConfigError
 from fmctd_dist.families.maze import hooks
 from fmctd_dist.families.maze.geometry import MAZE_UNIT, MazeGeometry
-from fmctd_dist.families.maze.wall_guide import WALL_MARGIN, WallGuide
+from fmctd_dist.families.maze.wall_guide import WallGuide
 
 # a 3 x 4 maze: walls around, two free cells (1, 1) and (1, 2) side by side
 WALLS = np.array([[1, 1, 1, 1], [1, 0, 0, 1], [1, 1, 1, 1]])
 MEAN, STD = [4.0, 0.0], [2.0, 2.0]
+MARGIN = 0.5
 
 
 def guide(weight: float = 1.0) -> WallGuide:
-    return WallGuide(WALLS, MEAN, STD, weight)
+    return WallGuide(WALLS, MEAN, STD, weight, MARGIN)
 
 
 def norm(xy) -> torch.Tensor:
@@ -36,7 +37,7 @@ def test_sdf_signs_and_penalty_only_near_or_inside_walls():
     assert sdf[1].item() == pytest.approx(-0.5 * MAZE_UNIT, abs=1e-5)  # the wall cell's centre: 2 into the wall
     assert g.penalty(norm([[free]])).item() == 0.0
     deep = g.penalty(norm([[wall]])).item()
-    assert deep == pytest.approx((WALL_MARGIN + 0.5 * MAZE_UNIT) / MAZE_UNIT, abs=1e-5)
+    assert deep == pytest.approx((MARGIN + 0.5 * MAZE_UNIT) / MAZE_UNIT, abs=1e-5)
     assert guide(3.0).penalty(norm([[wall]])).item() == pytest.approx(3 * deep, rel=1e-6)
 
 
@@ -66,6 +67,6 @@ def test_off_by_default_and_mazes_only():
     manifest = json.loads((REPO_ROOT / "checkpoints/pointmaze-medium-h5/manifest.json").read_text())
     assert hooks.guide_map(cfg, manifest) is None  # the paper's guidance, bit for bit
     on = hooks.guide_map(load_config(["env=pointmaze-medium", "method=fast-mctd", "method.wall_guidance=4"]), manifest)
-    assert isinstance(on, WallGuide) and on.weight == 4.0
+    assert isinstance(on, WallGuide) and on.weight == 4.0 and on.margin == 0.5
     with pytest.raises(ConfigError, match="method.wall_guidance=2.0 needs a point or ant maze"):
         load_config(["env=cube-single", "method=fast-mctd-replan", "method.wall_guidance=2"])

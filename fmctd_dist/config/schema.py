@@ -219,6 +219,7 @@ class MethodConfig:
     # Not the paper's either: a guidance term pushing plan frames out of wall cells (families/maze/wall_guide.py);
     # the value stays the authors'. Point / ant mazes only.
     wall_guidance: float = spec(0.0, ge=0, why="weight of the wall term in the guidance reward; 0 = off (the paper's)")
+    wall_margin: float = spec(0.5, ge=0, le=2.0, why="world units the wall term keeps plan frames off a wall face")
     bad_plan_tries: int = spec(10, ge=1, why="re-samples of plans that barely move")
     bad_plan_step: float = spec(0.1, ge=0, why="a plan barely moves if every step is below this")
     uct_c: float = spec(1.4142135623730951, ge=0, why="UCT exploration constant (sqrt 2)")

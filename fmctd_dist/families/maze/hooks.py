@@ -52,7 +52,7 @@ def guide_map(cfg: Config, manifest: dict[str, Any]):
         return None
     from fmctd_dist.families.maze.wall_guide import wall_guide
 
-    return wall_guide(cfg.env.name, manifest, cfg.method.wall_guidance)
+    return wall_guide(cfg.env.name, manifest, cfg.method.wall_guidance, cfg.method.wall_margin)
 
 
 def check_episodes(cfg: Config) -> str:

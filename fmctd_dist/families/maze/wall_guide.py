@@ -18,8 +18,6 @@ from torch import nn
 
 from fmctd_dist.families.maze.geometry import MAZE_UNIT, MazeGeometry
 
-WALL_MARGIN = 0.5  # world units kept clear of a wall face (the ant's body; a point robot needs less)
-
 
 def square_distance(p: torch.Tensor, centres: torch.Tensor) -> torch.Tensor:
     """[..., 2] points, [K, 2] cell centres -> [..., K]: Euclidean distance to each axis-aligned cell
@@ -37,8 +35,7 @@ class WallGuide(nn.Module):
     feels nothing.
     """
 
-    def __init__(self, walls: np.ndarray, mean: list[float], std: list[float], weight: float,
-                 margin: float = WALL_MARGIN):
+    def __init__(self, walls: np.ndarray, mean: list[float], std: list[float], weight: float, margin: float):
         super().__init__()
         centres = [MazeGeometry.cell_to_xy((i, j)) for i, j in np.ndindex(*walls.shape)]
         wall = np.asarray(walls).reshape(-1) != 0
@@ -62,9 +59,9 @@ class WallGuide(nn.Module):
         return self.weight * (torch.relu(self.margin - self.sdf(xy)) / MAZE_UNIT).mean(dim=-1)
 
 
-def wall_guide(env_name: str, manifest: dict[str, Any], weight: float) -> WallGuide:
+def wall_guide(env_name: str, manifest: dict[str, Any], weight: float, margin: float) -> WallGuide:
     """The wall guide of a maze planner checkpoint: its maze's cells, its normaliser."""
     from fmctd_dist.families.maze.geometry import maze_geometry
 
     norm = manifest["normaliser"]
-    return WallGuide(maze_geometry(env_name).walls, norm["mean"], norm["std"], weight)
+    return WallGuide(maze_geometry(env_name).walls, norm["mean"], norm["std"], weight, margin)
