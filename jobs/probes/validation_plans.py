@@ -8,7 +8,7 @@ goal (the warp test stops at the first waypoint within the radius, as the value'
 scores what the search hands the controller.
 
     python jobs/probes/validation_plans.py env=antmaze-large method=fast-mctd pairs=20 \
-        'settings=[method.wall_guidance=0, method.wall_guidance=0.3]'
+        'settings=[method.wall_guidance=0, method.wall_guidance=1 method.wall_margin=1]'   # words of a setting: spaces
 """
 
 from __future__ import annotations
@@ -72,8 +72,7 @@ def main(argv: list[str]) -> int:
     print(f"{opts['env']} {opts['method']}: {len(pairs)} validation pairs (seed {opts['seed']})", flush=True)
     print("| setting | valid and reaching | valid | reaching | plan s (mean) |\n|---|---|---|---|---|")
     for setting in settings:
-        cfg = load_config([f"env={opts['env']}", f"method={opts['method']}", "eval.threads=1"]
-                          + ([setting] if setting else []))
+        cfg = load_config([f"env={opts['env']}", f"method={opts['method']}", "eval.threads=1"] + setting.split())
         manifest = read_manifest(cfg.checkpoint_dir())
         denoiser = LocalDenoiser.from_checkpoint(cfg.checkpoint_dir(), cfg, guide_map=guide_map(cfg.env.name))
         rules = hooks_for(cfg.env.name).plan_rules(cfg)
