@@ -183,18 +183,23 @@ def test_two_trees_sharing_the_pool_at_once(prepared, pools):
 
 
 @pytest.mark.slow
+def plan_on_a_new_pool(prep, pools):
+    """(the plan over a fresh pool of 2 actors of ``prep``'s config, the pool, shut down)."""
+    pools.release()  # the module's pool holds the cluster's 2 CPUs
+    pool = DenoiserPool.create(prep, 2)
+    try:
+        return plan_with(prep, pool.denoiser()), pool
+    finally:
+        pool.shutdown()
+
+
 def test_plan_identical_local_and_two_actors_under_bf16_and_compile(tiny_checkpoint, pools):
     """Within one inference option (here both: bf16 weights and the compiled guided step) a plan is
     still the same bits in process and over 2 actors, each of which compiles its own graph (issue 22)."""
     args, _ = tiny_checkpoint
     prep = prepare(load_config(args + SEARCH + ["diffusion.precision=bf16", "diffusion.compile=true"]), hooks_for)
     ref = local_plan(prep)
-    pools.release()
-    pool = DenoiserPool.create(prep, 2)
-    try:
-        got = plan_with(prep, pool.denoiser())
-    finally:
-        pool.shutdown()
+    got, pool = plan_on_a_new_pool(prep, pools)
     assert_same(got, ref)
     # the actors print nothing: an emulated-bf16 warning (this CPU's, on this one node) comes back in their info
     import torch
@@ -213,10 +218,4 @@ def test_plan_identical_local_and_two_actors_with_wall_guidance(prepared, tiny_c
     ref = plan_with(prep, den)
     assert den.guide_map is not None
     assert not np.array_equal(ref[1].x[:ref[1].num_nodes], local_plan(prepared)[1].x[:ref[1].num_nodes])
-    pools.release()
-    pool = DenoiserPool.create(prep, 2)
-    try:
-        got = plan_with(prep, pool.denoiser())
-    finally:
-        pool.shutdown()
-    assert_same(got, ref)
+    assert_same(plan_on_a_new_pool(prep, pools)[0], ref)
