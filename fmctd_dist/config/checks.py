@@ -32,12 +32,11 @@ def validate(cfg: Config) -> None:
         raise ConfigError(f"visual.plan_xy=true adds the position estimator's (x, y) to a visual maze's latent "
                           f"frames; env.name={cfg.env.name} ({family(cfg.env.name)}) has no latents. "
                           "Drop visual.plan_xy")
-    walls = [w for w, on in (("wall_test", cfg.method.wall_test), ("wall_guidance", cfg.method.wall_guidance > 0))
-             if on]
-    if walls and family(cfg.env.name) not in ("pointmaze", "antmaze"):
-        raise ConfigError(f"method.{walls[0]}={getattr(cfg.method, walls[0])} needs a point or ant maze (the walls "
-                          f"come from its cells); env.name={cfg.env.name} ({family(cfg.env.name)}) has none. "
-                          f"Drop method.{walls[0]}")
+    for name, on in (("wall_test", cfg.method.wall_test), ("wall_guidance", cfg.method.wall_guidance > 0)):
+        if on and family(cfg.env.name) not in ("pointmaze", "antmaze"):
+            raise ConfigError(f"method.{name}={getattr(cfg.method, name)} needs a point or ant maze (the walls come "
+                              f"from its cells); env.name={cfg.env.name} ({family(cfg.env.name)}) has none. "
+                              f"Drop method.{name}")
     if cfg.model.kind == "diffuser" and cfg.method.planner != "diffuser":
         raise ConfigError(
             f"model.kind=diffuser with method.planner={cfg.method.planner}: the U-Net gives all plan tokens one "

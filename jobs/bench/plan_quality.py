@@ -50,8 +50,8 @@ from fmctd_dist.denoiser.local import LocalDenoiser
 from fmctd_dist.denoiser.protocol import DenoiseBatch
 from fmctd_dist.diffusion.checkpoint import load_checkpoint, normaliser_from_manifest, read_manifest
 from fmctd_dist.diffusion.schedule import PyramidSchedule
-from fmctd_dist.families.cube.data import load_cube_dataset
 from fmctd_dist.families import guide_map
+from fmctd_dist.families.cube.data import load_cube_dataset
 from fmctd_dist.families.cube.value import LEVEL, TABLE_Z, CubeValue
 from fmctd_dist.families.maze.geometry import maze_geometry
 from fmctd_dist.planners.fixed import uniform_levels

@@ -16,7 +16,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from fmctd_dist.families.maze.geometry import MAZE_UNIT, MazeGeometry
+from fmctd_dist.families.maze.geometry import MAZE_UNIT, MazeGeometry, maze_geometry
 
 
 def square_distance(p: torch.Tensor, centres: torch.Tensor) -> torch.Tensor:
@@ -61,7 +61,5 @@ class WallGuide(nn.Module):
 
 def wall_guide(env_name: str, manifest: dict[str, Any], weight: float, margin: float) -> WallGuide:
     """The wall guide of a maze planner checkpoint: its maze's cells, its normaliser."""
-    from fmctd_dist.families.maze.geometry import maze_geometry
-
     norm = manifest["normaliser"]
     return WallGuide(maze_geometry(env_name).walls, norm["mean"], norm["std"], weight, margin)
