@@ -43,3 +43,22 @@ def test_a_plan_through_the_wall_reaches_but_is_not_valid():
     assert job.plan_success(reached, start, goal, 1, 1.0, 2.0, geo) == (True, True)
     assert job.plan_success(np.repeat(around, 5, axis=0), start, goal, 5, 1.5, 2.0, geo) == (True, True)  # sparse
     assert job.plan_success(around[:6], start, goal, 1, 1.5, 2.0, geo) == (True, False)  # valid, short of the goal
+
+
+def test_the_ant_walks_a_straight_plan_and_clearances_need_an_ant(capsys):
+    import pytest
+
+    from fmctd_dist.config import load_config
+    from fmctd_dist.errors import ConfigError
+    from fmctd_dist.families.maze.make import make_env
+    from fmctd_dist.families.maze.robots import controller_factory
+
+    job = load_job("validation_plans")
+    with pytest.raises(ConfigError, match="clearances=.*not an AntMaze"):
+        job.main(["env=pointmaze-medium", "clearances=[0,1.5]"])
+    env = make_env("antmaze-medium")  # cells (1, 1) -> (1, 2) of medium: free, one cell apart
+    start, goal = XY((1, 1)), XY((1, 2))
+    plan = np.linspace(start, goal, 40)
+    make = controller_factory(load_config(["env=antmaze-medium", "env.wall_clearance=1.5"]))
+    assert job.walk(env, make(plan), start, goal, seed=0, steps=200)
+    assert not job.walk(env, make(plan[:1]), start, goal, seed=0, steps=30)  # stays at the start: never reaches

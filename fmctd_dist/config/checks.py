@@ -32,11 +32,11 @@ def validate(cfg: Config) -> None:
         raise ConfigError(f"visual.plan_xy=true adds the position estimator's (x, y) to a visual maze's latent "
                           f"frames; env.name={cfg.env.name} ({family(cfg.env.name)}) has no latents. "
                           "Drop visual.plan_xy")
-    for name, on in (("wall_test", cfg.method.wall_test), ("wall_guidance", cfg.method.wall_guidance > 0)):
-        if on and family(cfg.env.name) not in ("pointmaze", "antmaze"):
-            raise ConfigError(f"method.{name}={getattr(cfg.method, name)} needs a point or ant maze (the walls come "
-                              f"from its cells); env.name={cfg.env.name} ({family(cfg.env.name)}) has none. "
-                              f"Drop method.{name}")
+    for name, value in (("method.wall_test", cfg.method.wall_test), ("method.wall_guidance", cfg.method.wall_guidance),
+                        ("env.wall_clearance", cfg.env.wall_clearance)):
+        if value and family(cfg.env.name) not in ("pointmaze", "antmaze"):
+            raise ConfigError(f"{name}={value} needs a point or ant maze (the walls come from its cells); "
+                              f"env.name={cfg.env.name} ({family(cfg.env.name)}) has none. Drop {name}")
     if cfg.model.kind == "diffuser" and cfg.method.planner != "diffuser":
         raise ConfigError(
             f"model.kind=diffuser with method.planner={cfg.method.planner}: the U-Net gives all plan tokens one "

@@ -41,6 +41,10 @@ class EnvConfig:
     max_steps: int = spec(500, gt=0, why="env steps of one episode (500 medium/large, 1000 giant)")
     horizon: int = spec(500, gt=0, why="planning horizon in env steps (500 medium/large, 1000 giant)")
     policy: str = ""  # antmaze: low-level policy dir ("" -> checkpoints/<env>-policy); unused for pointmaze
+    # mazes (not the paper's): the robot follows a copy of each plan pushed this far off the walls
+    # (families/maze/clearance.py); the rows keep the planner's own plan
+    wall_clearance: float = spec(0.0, ge=0, le=2.0, why="world units the robot's copy of a plan keeps off a wall "
+                                                        "face (a corridor's centre line is 2.0); 0 = off (the paper's)")
     # cube envs (docs/reference.md §13); 0 / [] = the method's setting (mazes leave them so)
     replan_every: int = spec(0, ge=0, why="env steps between replans for methods that replan; 0 = "
                                          "method.replan_every (cubes: 100 single, 200 double/triple)")

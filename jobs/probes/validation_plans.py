@@ -9,6 +9,11 @@ scores what the search hands the controller.
 
     python jobs/probes/validation_plans.py env=antmaze-large method=fast-mctd pairs=20 \
         'settings=[method.wall_guidance=0, method.wall_guidance=1 method.wall_margin=1]'   # words of a setting: spaces
+
+On AntMaze, ``clearances=[0,1.5]`` also walks each plan with the ant (its low-level policy, ``env.max_steps``
+steps, the controller's copy of the plan kept ``env.wall_clearance`` off the walls) and adds the share of
+ants that reached the goal per clearance: the plan is made once and walked once per clearance, so the
+columns differ by the controller alone.
 """
 
 from __future__ import annotations
@@ -18,12 +23,15 @@ import time
 import numpy as np
 
 from fmctd_dist.cli import run
-from fmctd_dist.config import load_config
+from fmctd_dist.config import is_ant, load_config
 from fmctd_dist.denoiser.local import LocalDenoiser
 from fmctd_dist.diffusion.checkpoint import normaliser_from_manifest, read_manifest
 from fmctd_dist.errors import ConfigError
 from fmctd_dist.families import guide_map, hooks_for
+from fmctd_dist.families.maze.antmaze import AntMaze
 from fmctd_dist.families.maze.geometry import MazeGeometry, maze_geometry
+from fmctd_dist.families.maze.make import make_env
+from fmctd_dist.families.maze.robots import Controller, controller_factory
 from fmctd_dist.planners.base import plan_seed
 from fmctd_dist.planners.factory import make_planner
 
@@ -59,25 +67,45 @@ def plan_success(waypoints: np.ndarray, start: np.ndarray, goal: np.ndarray, jum
     return bool(no_warp and geo.path_in_free(walk)), bool(near.any())
 
 
+def walk(env: AntMaze, ctrl: Controller, start: np.ndarray, goal: np.ndarray, seed: int, steps: int) -> bool:
+    """The ant from ``start`` (reset noise from ``seed``) follows ``ctrl`` for up to ``steps``: reached ``goal``?"""
+    obs = env.reset_to(start, goal, seed)
+    for _ in range(steps):
+        obs, success = env.step(ctrl.act(obs))
+        if success:
+            return True
+    return False
+
+
 def main(argv: list[str]) -> int:
-    opts = {"env": "antmaze-large", "method": "fast-mctd", "pairs": "20", "seed": "0", "settings": "[]"}
+    opts = {"env": "antmaze-large", "method": "fast-mctd", "pairs": "20", "seed": "0", "settings": "[]",
+            "clearances": "[]"}
     for a in argv:
         key, sep, value = a.partition("=")
         if not sep or key not in opts:
             raise ConfigError(f"validation_plans: unknown argument {a!r}; expected any of {', '.join(opts)}")
         opts[key] = value
     settings = [s.strip() for s in opts["settings"].strip("[]").split(",") if s.strip()] or [""]
+    clearances = [float(c) for c in opts["clearances"].strip("[]").split(",") if c.strip()]
+    if clearances and not is_ant(opts["env"]):
+        raise ConfigError(f"validation_plans: clearances={opts['clearances']} walks the plans with the ant; "
+                          f"env={opts['env']} is not an AntMaze. Drop clearances")
     geo = maze_geometry(opts["env"])
     pairs = validation_pairs(geo, int(opts["pairs"]), int(opts["seed"]))
     print(f"{opts['env']} {opts['method']}: {len(pairs)} validation pairs (seed {opts['seed']})", flush=True)
-    print("| setting | valid and reaching | valid | reaching | plan s (mean) |\n|---|---|---|---|---|")
+    walked = "".join(f" ant reached, clearance {c:g} |" for c in clearances)
+    print(f"| setting | valid and reaching | valid | reaching | plan s (mean) |{walked}\n"
+          f"|---|---|---|---|---|{'---|' * len(clearances)}")
+    env = make_env(opts["env"]) if clearances else None
     for setting in settings:
         cfg = load_config([f"env={opts['env']}", f"method={opts['method']}", "eval.threads=1"] + setting.split())
         manifest = read_manifest(cfg.checkpoint_dir())
         denoiser = LocalDenoiser.from_checkpoint(cfg.checkpoint_dir(), cfg, guide_map=guide_map(cfg.env.name))
         rules = hooks_for(cfg.env.name).plan_rules(cfg)
         planner = make_planner(cfg, denoiser, normaliser_from_manifest(manifest), rules)
-        tally, seconds = [], 0.0
+        walkers = [controller_factory(load_config([f"env={opts['env']}", f"env.wall_clearance={c}"]))
+                   for c in clearances]
+        tally, reached, seconds = [], np.zeros(len(clearances)), 0.0
         for k, (a, b) in enumerate(pairs):
             start, goal = geo.cell_to_xy(a), geo.cell_to_xy(b)
             t0 = time.perf_counter()
@@ -85,9 +113,12 @@ def main(argv: list[str]) -> int:
             seconds += time.perf_counter() - t0
             tally.append(plan_success(out.waypoints, start, goal, cfg.jump, cfg.method.warp_threshold,
                                       cfg.method.goal_radius, geo))
+            for i, make in enumerate(walkers):
+                reached[i] += walk(env, make(out.waypoints), start, goal, k, cfg.env.max_steps)
         v, r = np.array(tally).T
+        cells = "".join(f" {n / len(pairs):.0%} |" for n in reached)
         print(f"| {setting or 'default'} | {np.mean(v & r):.0%} ({int((v & r).sum())}/{len(pairs)}) | {v.mean():.0%} | "
-              f"{r.mean():.0%} | {seconds / len(pairs):.1f} |", flush=True)
+              f"{r.mean():.0%} | {seconds / len(pairs):.1f} |{cells}", flush=True)
     return 0
 
 

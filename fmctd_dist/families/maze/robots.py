@@ -47,14 +47,23 @@ def check_controller(cfg: Config) -> dict[str, Any] | None:
 
 
 def controller_factory(cfg: Config) -> ControllerFactory:
-    """``plan [F, 2] (one x, y per env step) -> controller``; loads the ant policy once."""
+    """``plan [F, 2] (one x, y per env step) -> controller``; loads the ant policy once. With
+    ``env.wall_clearance`` the controller follows the plan pushed off the walls (:mod:`.clearance`)."""
     if not is_ant(cfg.env.name):
         from fmctd_dist.families.maze.pd import PDController
 
-        return PDController
-    from fmctd_dist.control.policy.checkpoint import load_policy
-    from fmctd_dist.families.maze.ant_controller import AntPlanController
-    from fmctd_dist.families.maze.ant_policy import ANT_SPEC
+        make: ControllerFactory = PDController
+    else:
+        from fmctd_dist.control.policy.checkpoint import load_policy
+        from fmctd_dist.families.maze.ant_controller import AntPlanController
+        from fmctd_dist.families.maze.ant_policy import ANT_SPEC
 
-    policy = load_policy(policy_dir(cfg), ANT_SPEC, cfg.env.name)
-    return lambda plan: AntPlanController(plan, policy.act)
+        policy = load_policy(policy_dir(cfg), ANT_SPEC, cfg.env.name)
+        make = lambda plan: AntPlanController(plan, policy.act)  # noqa: E731
+    if not cfg.env.wall_clearance:
+        return make
+    from fmctd_dist.families.maze.clearance import keep_clear
+    from fmctd_dist.families.maze.geometry import maze_geometry
+
+    geo, clearance = maze_geometry(cfg.env.name), cfg.env.wall_clearance
+    return lambda plan: make(keep_clear(plan, geo, clearance))
