@@ -26,7 +26,7 @@ from fmctd_dist.families.maze.robots import controller_factory
 from fmctd_dist.planners.base import PlanOutput
 from fmctd_dist.registry import require_family
 
-DATA_SPEED = 0.14  # world units per env step: the mean step of our AntMaze plans and data (0.13-0.14)
+DATA_SPEED = 0.14  # world units per env step: the mean step of our AntMaze plans (0.13-0.14), which follow the data
 STILL_STEPS, STILL_RANGE = 200, 1.0  # as jobs/probes/why_failed.py
 
 
