@@ -19,7 +19,7 @@ import numpy as np
 
 from fmctd_dist.cli import run
 from fmctd_dist.config import load_config
-from fmctd_dist.families.maze.episode import run_episode
+from fmctd_dist.families.maze.episode import run_episode, stood_still
 from fmctd_dist.families.maze.geometry import MazeGeometry, maze_geometry
 from fmctd_dist.families.maze.make import make_env
 from fmctd_dist.families.maze.robots import controller_factory
@@ -27,7 +27,6 @@ from fmctd_dist.planners.base import PlanOutput
 from fmctd_dist.registry import require_family
 
 DATA_SPEED = 0.14  # world units per env step: the mean step of our AntMaze plans (0.13-0.14), which follow the data
-STILL_STEPS, STILL_RANGE = 200, 1.0  # as jobs/probes/why_failed.py
 
 
 def cell_path(geo: MazeGeometry, start: np.ndarray, goal: np.ndarray) -> np.ndarray:
@@ -101,12 +100,10 @@ def main(argv: list[str]) -> int:
             row = run_episode(cfg, env, planner, task, seed, make_controller=make_controller)
             traj = np.asarray(row["traj_xy"]).reshape(-1, 2)
             goal = geo.task(task).goal_xy
-            tail = traj[-STILL_STEPS:]
-            still = len(traj) > STILL_STEPS and np.ptp(tail, axis=0).max() < STILL_RANGE
             wins, total = wins + row["success"], total + 1
             print(f"  task {task} seed {seed}: {'success' if row['success'] else 'FAIL'} in {row['env_steps']} steps, "
                   f"plan {len(row['plan_xy']) // 2} steps, closest {np.linalg.norm(traj - goal, axis=1).min():.2f}"
-                  f"{', stood still' if still and not row['success'] else ''}", flush=True)
+                  f"{', stood still' if stood_still(traj) and not row['success'] else ''}", flush=True)
     print(f"{cfg.env.name}: {wins} of {total} episodes reached the goal ({100 * wins / max(total, 1):.0f}%)")
     return 0
 

@@ -97,14 +97,13 @@ def main(argv: list[str]) -> int:
     print(f"| setting | valid and reaching | valid | reaching | plan s (mean) |{walked}\n"
           f"|---|---|---|---|---|{'---|' * len(clearances)}")
     env = make_env(opts["env"]) if clearances else None
+    walkers = [controller_factory(load_config([f"env={opts['env']}", f"env.wall_clearance={c}"])) for c in clearances]
     for setting in settings:
         cfg = load_config([f"env={opts['env']}", f"method={opts['method']}", "eval.threads=1"] + setting.split())
         manifest = read_manifest(cfg.checkpoint_dir())
         denoiser = LocalDenoiser.from_checkpoint(cfg.checkpoint_dir(), cfg, guide_map=guide_map(cfg.env.name))
         rules = hooks_for(cfg.env.name).plan_rules(cfg)
         planner = make_planner(cfg, denoiser, normaliser_from_manifest(manifest), rules)
-        walkers = [controller_factory(load_config([f"env={opts['env']}", f"env.wall_clearance={c}"]))
-                   for c in clearances]
         tally, reached, seconds = [], np.zeros(len(clearances)), 0.0
         for k, (a, b) in enumerate(pairs):
             start, goal = geo.cell_to_xy(a), geo.cell_to_xy(b)

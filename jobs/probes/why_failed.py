@@ -31,11 +31,8 @@ from fmctd_dist.errors import ConfigError
 from fmctd_dist.evaluation.plan_tally import plan_statuses
 from fmctd_dist.evaluation.results import ResultStore
 from fmctd_dist.families.cube.failures import REASONS
+from fmctd_dist.families.maze.episode import stood_still
 from fmctd_dist.families.maze.geometry import densify, maze_geometry
-
-STILL_STEPS = 200  # a robot whose last STILL_STEPS positions span less than STILL_RANGE stopped
-STILL_RANGE = 1.0
-
 
 def failures(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """Per failed row: status, first-plan length / end distance to the goal / share of its path in free
@@ -50,13 +47,12 @@ def failures(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
         traj = np.asarray(r["traj_xy"], dtype=np.float64).reshape(-1, 2)
         path = densify(plan)  # 10 points along each plan step
         statuses = str(r["plan_status"]).split(",")
-        tail = traj[-STILL_STEPS:]
         out.append({"task": r["task"], "seed": r["seed"], "plan_len": len(plan),
                     "status": statuses[0] if len(statuses) == 1 else f"{len(statuses)} plans",
                     "plan_end_to_goal": float(np.linalg.norm(plan[-1] - goal)),
                     "plan_in_free": float(geo.in_free_cell(path).mean()),
                     "closest": float(np.linalg.norm(traj - goal, axis=1).min()), "steps": r["env_steps"],
-                    "stopped": bool(len(traj) > STILL_STEPS and np.ptp(tail, axis=0).max() < STILL_RANGE)})
+                    "stopped": stood_still(traj)})
     return out
 
 

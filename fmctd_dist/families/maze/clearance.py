@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from fmctd_dist.families.maze.geometry import MAZE_UNIT, MazeGeometry
+from fmctd_dist.families.maze.geometry import MAZE_UNIT, MazeGeometry, cell_centres
 
 ITERATIONS = 20  # each moves a point half its shortfall: 1 - 2^-20 of the way where one wall decides
 STEP = 0.5  # half steps settle between two walls closer than 2 x clearance instead of bouncing
@@ -43,9 +43,7 @@ def keep_clear(plan: np.ndarray, geo: MazeGeometry, clearance: float) -> np.ndar
     xy = np.array(plan, dtype=np.float64)
     if clearance <= 0 or len(xy) == 0:
         return xy
-    cells = np.array([geo.cell_to_xy(ij) for ij in np.ndindex(*geo.shape)])
-    wall = np.asarray(geo.walls).reshape(-1) != 0
-    walls, free = cells[wall], cells[~wall]
+    walls, free = cell_centres(geo.walls)
     for _ in range(ITERATIONS):
         d_wall, q_wall, c_wall = _nearest_square(xy, walls)
         d_free, q_free, _ = _nearest_square(xy, free)

@@ -54,3 +54,14 @@ def maze_row(tally: PlanTally, success: bool, steps: int, plan_xy: Any, traj: li
     so grids, tables, plots and reports read any of them. ``plan_xy``: the first plan's (x, y) [N, 2]."""
     return {**tally.row(success, steps), "plan_xy": np.asarray(plan_xy, np.float32).reshape(-1).tolist(),
             "traj_xy": np.asarray(traj, np.float32).reshape(-1).tolist()}
+
+
+STILL_STEPS = 200  # a robot whose last STILL_STEPS positions span less than STILL_RANGE stopped
+STILL_RANGE = 1.0
+
+
+def stood_still(traj_xy: Any) -> bool:
+    """A row's executed x, y path [T, 2] (or flat) ends with the robot stopped: its last ``STILL_STEPS``
+    positions span less than ``STILL_RANGE`` (a fallen ant never gets up; a robot can also push into a wall)."""
+    traj = np.asarray(traj_xy, dtype=np.float64).reshape(-1, 2)
+    return bool(len(traj) > STILL_STEPS and np.ptp(traj[-STILL_STEPS:], axis=0).max() < STILL_RANGE)

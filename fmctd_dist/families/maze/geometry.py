@@ -138,6 +138,14 @@ class MazeGeometry:
         return ~self.in_free_cell(along.reshape(*along.shape[:-2], -1, per_step, 2)).all(-1)
 
 
+def cell_centres(walls: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """[rows, cols] wall map -> ([W, 2] wall cell centres, [F, 2] free cell centres), world x, y in row-major
+    cell order: the squares a signed distance to the walls is measured against (wall guide, clearance)."""
+    centres = np.array([MazeGeometry.cell_to_xy((i, j)) for i, j in np.ndindex(*np.shape(walls))])
+    wall = np.asarray(walls).reshape(-1) != 0
+    return centres[wall], centres[~wall]
+
+
 def densify(path: np.ndarray, per_step: int = 10) -> np.ndarray:
     """[..., F, 2] polyline -> [..., 1 + per_step (F - 1), 2]: its first point, then ``per_step`` evenly
     spaced points along each step (ending on every vertex). Two free points can sit on either side

@@ -16,7 +16,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from fmctd_dist.families.maze.geometry import MAZE_UNIT, MazeGeometry, maze_geometry
+from fmctd_dist.families.maze.geometry import MAZE_UNIT, cell_centres, maze_geometry
 
 
 def square_distance(p: torch.Tensor, centres: torch.Tensor) -> torch.Tensor:
@@ -37,11 +37,9 @@ class WallGuide(nn.Module):
 
     def __init__(self, walls: np.ndarray, mean: list[float], std: list[float], weight: float, margin: float):
         super().__init__()
-        centres = [MazeGeometry.cell_to_xy((i, j)) for i, j in np.ndindex(*walls.shape)]
-        wall = np.asarray(walls).reshape(-1) != 0
-        cells = torch.as_tensor(np.asarray(centres), dtype=torch.float32)
-        self.register_buffer("wall_cells", cells[torch.as_tensor(wall)])
-        self.register_buffer("free_cells", cells[torch.as_tensor(~wall)])
+        wall_cells, free_cells = cell_centres(walls)
+        self.register_buffer("wall_cells", torch.as_tensor(wall_cells, dtype=torch.float32))
+        self.register_buffer("free_cells", torch.as_tensor(free_cells, dtype=torch.float32))
         self.register_buffer("mean", torch.as_tensor(mean, dtype=torch.float32))
         self.register_buffer("std", torch.as_tensor(std, dtype=torch.float32))
         self.in_dim = len(mean)
