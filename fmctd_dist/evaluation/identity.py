@@ -17,6 +17,7 @@ import json
 from typing import Any
 
 from fmctd_dist.config import Config
+from fmctd_dist.errors import ResultsError
 
 CONFIG_SCHEMA = 1  # bump when a config default changes meaning (tests/golden/config_defaults.json)
 RUN_ONLY = ("ray",)  # sections that say where a grid runs, never what a plan is
@@ -61,6 +62,25 @@ def identity_columns(cfg: Config) -> dict[str, Any]:
     """Columns every row carries so that a later run can say exactly what differs."""
     return {"config_hash": config_hash(cfg), "config_schema": CONFIG_SCHEMA,
             "config_json": json.dumps(plan_config(cfg), sort_keys=True, default=str)}
+
+
+def recorded_config(row: dict[str, Any]) -> Config:
+    """The plan config a row was made with: ``Config()``'s defaults with the row's ``config_json`` on top (a row
+    records the fields off those defaults, not off its env's and method's config files). Fields outside the plan
+    (``eval.out``, ``ray``) keep their defaults. For probes that replay an episode (``jobs/probes/rewalk.py``)."""
+    from fmctd_dist.config.loader import config_from_dict
+
+    if not row.get("config_json"):
+        raise ResultsError(f"the row of {row.get('method')} {row.get('env')} task {row.get('task')} seed "
+                           f"{row.get('seed')} records no config (written before rows recorded one)")
+    d = Config().to_dict()
+    for key, value in json.loads(row["config_json"]).items():
+        *groups, name = key.split(".")
+        target = d
+        for group in groups:
+            target = target[group]
+        target[name] = value
+    return config_from_dict(d)
 
 
 def row_identity(row: dict[str, Any]) -> tuple:
