@@ -60,6 +60,17 @@ def test_replanned_rows_and_a_missing_directory_are_refused(tmp_path):
         job.main([str(directory)])
 
 
+def test_bad_clearances_and_flags_are_refused_before_any_walk(tmp_path):
+    job = load_job("rewalk")
+    directory, _ = _rows(tmp_path)
+    with pytest.raises(ConfigError, match="env.wall_clearance=3.0 must be"):
+        job.main([str(directory), "clearances=[0,3]"])
+    with pytest.raises(ConfigError, match="give numbers"):
+        job.main([str(directory), "clearances=[a]"])
+    with pytest.raises(ConfigError, match="unknown flag --all"):
+        job.main([str(directory), "--all"])
+
+
 def test_a_row_without_a_recorded_config_cannot_be_rebuilt():
     from fmctd_dist.errors import ResultsError
     from fmctd_dist.evaluation.identity import recorded_config

@@ -25,6 +25,7 @@ import numpy as np
 
 from fmctd_dist.cli import run
 from fmctd_dist.config import Config, is_ant
+from fmctd_dist.config.checks import validate
 from fmctd_dist.errors import ConfigError, ResultsError
 from fmctd_dist.evaluation.identity import config_hash, recorded_config
 from fmctd_dist.evaluation.results import ResultStore
@@ -63,7 +64,9 @@ def row_config(row: dict[str, Any], clearance: float | None = None) -> Config:
                            f"({config_hash(cfg)} against {row.get('config_hash')}): a default changed meaning since")
     if clearance is None:
         return cfg
-    return dataclasses.replace(cfg, env=dataclasses.replace(cfg.env, wall_clearance=float(clearance)))
+    cfg = dataclasses.replace(cfg, env=dataclasses.replace(cfg.env, wall_clearance=float(clearance)))
+    validate(cfg)  # the schema's range for env.wall_clearance: one error naming it, before any walk
+    return cfg
 
 
 def walk(env: Any, controller: Any, row: dict[str, Any], max_steps: int) -> tuple[bool, int, np.ndarray, bool]:
@@ -80,19 +83,25 @@ def walk(env: Any, controller: Any, row: dict[str, Any], max_steps: int) -> tupl
 def main(argv: list[str]) -> int:
     dirs = [Path(a) for a in argv if not a.startswith("clearances=") and not a.startswith("--")]
     clearances = [a.split("=", 1)[1] for a in argv if a.startswith("clearances=")]
+    flags = [a for a in argv if a.startswith("--") and a != "--episodes"]
+    if flags:
+        raise ConfigError(f"unknown flag {flags[0]}; rewalk.py takes a directory, clearances=[...] and --episodes")
     if len(dirs) != 1:
         raise ConfigError(f"give one results/<run>/<method>/<env> directory, got {[str(d) for d in dirs]}")
     rows = read_rows(dirs[0])
     name = rows[0]["env"]
     require_family(name, ("pointmaze", "antmaze"), "jobs/probes/rewalk.py")
     base = row_config(rows[0])
-    values = ([float(c) for c in clearances[0].strip("[]").split(",") if c.strip()] if clearances
-              else [base.env.wall_clearance])
+    try:
+        values = ([float(c) for c in clearances[0].strip("[]").split(",") if c.strip()] if clearances
+                  else [base.env.wall_clearance])
+    except ValueError:
+        raise ConfigError(f"clearances={clearances[0]}: give numbers, e.g. clearances=[0,1.5,2]") from None
+    configs = [row_config(rows[0], c) for c in values]  # every clearance checked before the first walk
     env = make_env(name)
     print(f"{dirs[0]}: {len(rows)} rows ({sum(r['success'] for r in rows)} reached the goal), "
           f"recorded at clearance {base.env.wall_clearance}")
-    for clearance in values:
-        cfg = row_config(rows[0], clearance)
+    for clearance, cfg in zip(values, configs):
         make = controller_factory(cfg)
         reached = agree = fallen = 0
         lines = []

@@ -8,8 +8,9 @@ Maze rows: how the search ended (plan_status; replanning methods: the count of p
 the first plan's length and end distance to the goal, the share of the path along it (10 points
 per step) inside free maze cells (below 100% the plan cuts through a wall, which the authors'
 value function does not test), how close the executed trajectory came to the goal, and whether
-the robot stood still for its last 200 steps (a fallen ant never gets up). A summary line per
-directory counts wall-cutting plans and robots that stopped.
+the robot stood still for its last 200 steps (a fallen ant never gets up; ``rewalk.py`` walks the plans again
+and tells a fallen ant from one pushing a wall). A summary line per directory counts wall-cutting plans and
+robots that stopped.
 
 Rows that carry a ``why_failed`` reason (the cube episodes: wrong cube, dropped, stack knocked
 over, time out, planning time out) print that reason with how the plans ended, how close the
