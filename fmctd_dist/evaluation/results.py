@@ -75,6 +75,14 @@ class ResultStore:
             out.extend(self.read(f) or [])
         return out
 
+    @classmethod
+    def directory_rows(cls, directory: str | Path) -> list[dict[str, Any]]:
+        """The rows of one ``<out>/<run>/<method>/<env>`` directory (what the probes take); [] for a shorter path."""
+        full = Path(directory).resolve()
+        if len(full.parents) <= 2:
+            return []
+        return cls(full.parents[2], full.parents[1].name).rows(full.parent.name, full.name)
+
     def report(self) -> list[str]:
         """One line per unreadable row file (what a job prints before re-running those episodes)."""
         return [f"warning: {p} is unreadable ({why}); its episode is re-run and the file replaced"

@@ -38,10 +38,7 @@ from fmctd_dist.registry import require_family
 
 def read_rows(directory: Path) -> list[dict[str, Any]]:
     """The rows of one ``<run>/<method>/<env>`` directory, in (task, seed) order; one plan each, one config."""
-    full = directory.resolve()  # <out>/<run>/<method>/<env>
-    rows = (ResultStore(full.parents[2], full.parents[1].name).rows(full.parent.name, full.name)
-            if len(full.parents) > 2 else [])
-    rows = sorted(rows, key=lambda r: (r["task"], r["seed"]))
+    rows = sorted(ResultStore.directory_rows(directory), key=lambda r: (r["task"], r["seed"]))
     if not rows:
         raise ConfigError(f"{directory}: no result rows (give a results/<run>/<method>/<env> directory)")
     replanned = [r for r in rows if int(r.get("plans") or 1) > 1]

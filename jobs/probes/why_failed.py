@@ -35,6 +35,7 @@ from fmctd_dist.families.cube.failures import REASONS
 from fmctd_dist.families.maze.episode import stood_still
 from fmctd_dist.families.maze.geometry import densify, maze_geometry
 
+
 def failures(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """Per failed row: status, first-plan length / end distance to the goal / share of its path in free
     cells, closest approach of the executed trajectory, and whether the robot stood still at the end."""
@@ -122,12 +123,6 @@ def result_dirs(d: Path) -> list[Path]:
     return sorted({p.parent for p in d.glob("*/*/task=*") if p.is_dir()})
 
 
-def read_rows(d: Path) -> list[dict]:
-    full = d.resolve()  # <out>/<run>/<method>/<env>
-    return (ResultStore(full.parents[2], full.parents[1].name).rows(full.parent.name, full.name)
-            if len(full.parents) > 2 else [])
-
-
 def print_maze(d: Path, rows: list[dict]) -> None:
     fails = failures(rows)
     print(f"{d}: {len(fails)} of {len(rows)} episodes failed")
@@ -159,7 +154,7 @@ def main(argv: list[str]) -> int:
             raise ConfigError(f"why_failed: {arg} has no task=*/seed=*.parquet rows (a <run>/<method>/<env> dir, "
                               "or a <run> dir holding such dirs)")
         for d in dirs:
-            rows = read_rows(d)
+            rows = ResultStore.directory_rows(d)
             if not rows:
                 raise ConfigError(f"why_failed: {d} has no readable task=*/seed=*.parquet rows")
             if has_reasons(rows):
