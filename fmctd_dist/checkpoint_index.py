@@ -24,12 +24,13 @@ EVAL = "eval"  # how a config reads a dir: its eval job's checks open it
 EXPERT = "data.expert"  # ... or its dataset is made with it (AntMaze)
 
 # Config words beyond each env x method default that name a shipped model: (env, words). The H=2 / H=10
-# medium models of the jump ablation (run ablate-h); the visual maze's [z, x, y] planners (the visual table).
+# medium models of the jump ablation (run ablate-h); the visual maze's latent planners (the paper's frames: the
+# notebook's latent lines; the visual envs' default plans [z, x, y] frames).
 VARIANTS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("pointmaze-medium", ("jump=2",)),
     ("pointmaze-medium", ("jump=10",)),
-    ("visual-pointmaze-medium", ("visual.plan_xy=true",)),
-    ("visual-pointmaze-large", ("visual.plan_xy=true",)),
+    ("visual-pointmaze-medium", ("visual.plan_xy=false",)),
+    ("visual-pointmaze-large", ("visual.plan_xy=false",)),
 )
 
 # Dirs no config reads by default that something else needs: dir -> who and why.

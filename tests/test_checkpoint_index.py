@@ -55,9 +55,9 @@ def test_the_default_planners_policies_and_parts_are_read(readers):
     assert "env=antmaze-large method=fast-mctd: eval" in r["antmaze-large-policy"]
     assert "env=antmaze-medium method=mctd: data.expert" in r["ant-expert"]
     assert "env=cube-triple method=fast-mctd: eval" in r["cube-single-policy"]
-    assert "env=visual-pointmaze-medium method=fast-mctd visual.plan_xy=true: eval" in r[
-        "visual-pointmaze-medium-h5-xy"]
-    assert "env=visual-pointmaze-large method=mctd visual.plan_xy=true: eval" in r["visual-pointmaze-large-vae"]
+    assert "env=visual-pointmaze-medium method=fast-mctd: eval" in r["visual-pointmaze-medium-h5-xy"]
+    assert "env=visual-pointmaze-medium method=fast-mctd visual.plan_xy=false: eval" in r["visual-pointmaze-medium-h5"]
+    assert "env=visual-pointmaze-large method=mctd: eval" in r["visual-pointmaze-large-vae"]
     assert "pointmaze-medium-h5" not in r.get("pointmaze-large-h5", [])
 
 

@@ -262,37 +262,62 @@ def test_glance_table_shows_todays_largest_line_per_cell_beside_the_paper():
     assert "| mctd / mctd-replan | ‡ / 100 | – / 100 |" in table  # run, but only at settings other than today's
 
 
-def test_visual_table_prints_each_lines_settings_and_never_averages_two_configs():
-    import json
-
+def test_visual_table_reads_each_method_at_its_default_and_the_shipped_weights_only():
     from fmctd_dist.config import load_config
     from fmctd_dist.evaluation.identity import identity_columns
-    from fmctd_dist.families.visual.table import VisualLine, search_statuses, visual_table
+    from fmctd_dist.families.visual.table import default_config, search_statuses, shipped, training, visual_table
 
     env = "visual-pointmaze-large"
-    plain = identity_columns(load_config([f"env={env}", "method=fast-mctd"]))
-    xy = identity_columns(load_config([f"env={env}", "method=fast-mctd", "visual.plan_xy=true",
-                                       "diffusion.boundary_guidance=8"]))
-    assert json.loads(xy["config_json"])["visual.plan_xy"] is True
-    rows = [{**row(k, s, k == 1, env=env, jump=5), **ids, "checkpoint_digest": digest, "run": "visual-x",
+    planner, invdyn = shipped("fast-mctd", env)
+    assert planner and invdyn  # the committed checkpoints
+    ours = {"checkpoint_digest": planner, "policy_digest": invdyn}
+    default = identity_columns(default_config("fast-mctd", env))
+    named = identity_columns(load_config([f"env={env}", "method=fast-mctd",  # the shipped weights, by their path
+                                          f"checkpoint=checkpoints/{default_config('fast-mctd', env).run_name}"]))
+    plain = identity_columns(load_config([f"env={env}", "method=fast-mctd", "diffusion.boundary_guidance=0"]))
+    assert named["config_hash"] != default["config_hash"]
+    rows = [{**row(k, s, k == 1, env=env, jump=5), **default, **ours, "run": "visual-x",
              "plan_status": "early_stop" if k == 1 else "stay,stay"}  # task 2 replanned once, both searches empty
-            for ids, digest in ((plain, "aaaa1111"), (xy, "bbbb2222")) for k in (1, 2) for s in (0, 1)]
-    rows += [{**row(1, 0, True, env=env, method="s-mctd", jump=5), **plain, "checkpoint_digest": "c",
-              "run": "visual-other"}]  # another run: not this table's line
-    lines = (VisualLine("fast-mctd", env, "visual-x", "ours"), VisualLine("s-mctd", env, "visual-y"))
-    table = visual_table(rows, lines)
-    assert "| fast-mctd (ours) | large | 4 (2 x 2) | 50 ± 0 | 100/0 |" in table
-    assert table.count("| fast-mctd (ours) | large |") == 2  # one line per identity
-    assert "| stay 4, early_stop 2 | `aaaa1111`, H=5 | default |" in table  # every plan's status, counted
-    assert "`bbbb2222`, H=5 | diffusion.boundary_guidance=8.0, visual.plan_xy=True |" in table
-    assert "| s-mctd | large | no rows yet |" in table and "| mctd | large | not run |" in table
-    assert "| mctd-replan | medium | not run | | | | | | | | 86 / 129.8 s |" in table
+            for k in (1, 2) for s in (0, 1)]
+    rows += [{**row(k, 2, True, env=env, jump=5), **named, **ours, "run": "visual-y", "plan_status": "achieved"}
+             for k in (1, 2)]
+    rows += [{**row(k, 3, True, env=env, jump=5), **plain, **ours, "run": "visual-z"} for k in (1, 2)]  # other setting
+    rows += [{**row(k, 4, True, env=env, jump=5), **default, "checkpoint_digest": "older", "policy_digest": invdyn,
+              "run": "visual-z"} for k in (1, 2)]  # older weights
+    table = visual_table(rows)
+    saw = training(default_config("fast-mctd", env))
+    assert ("| fast-mctd | large | 6 (2 x 3) | 67 ± 24 | 100/33 | 1.0 ± 0.0 | stay 4, early_stop 2, achieved 2 | "
+            f"`{planner[:8]}`, H=5 | {saw} | [z, x, y] frames, boundary guidance 8 | `visual-x`, `visual-y` | "
+            "32 / 5.1 s |") in table
+    assert saw.endswith("%), 100 episodes")  # its latent store: 100 train episodes
+    assert table.count("| fast-mctd | large |") == 1  # one line per method and maze
+    assert "| s-mctd | large | no episodes at the default yet |" in table
+    assert ("| diffuser | medium | no episodes at the default yet | | | | | | 0.1 M windows (9.1%), 20 episodes | "
+            "latent frames (the paper's) |") in table
     assert search_statuses([{"plan_status": "plan,plan"}, {"plan_status": "plan"}]) == "no search"  # DF, Diffuser
-    # a run still going prints how much of its grid it has, so a partial line never reads as whole
-    partial = visual_table(rows[:3], lines)
-    assert "| fast-mctd (ours) | large | 3 (2 x 2, partial: 3 of 4) | 75 ± 25 | 100/0 |" in partial
-    planned = (VisualLine("fast-mctd", env, "visual-x", "ours", episodes=10),)  # the grid its run will fill
-    assert "| fast-mctd (ours) | large | 4 (2 x 2, partial: 4 of 10) |" in visual_table(rows[:4], planned)
+
+
+def test_an_env_file_sets_one_methods_defaults_after_the_method_file(tmp_path, monkeypatch):
+    import pytest
+
+    from fmctd_dist.config import load_config, loader
+    from fmctd_dist.errors import ConfigError
+
+    def config(method: str, *words: str):
+        return load_config(["env=visual-pointmaze-medium", f"method={method}", *words])
+
+    assert config("fast-mctd").diffusion.boundary_guidance == 8.0  # no entry: the env file's value
+    assert config("diffuser").diffusion.boundary_guidance == 0.0  # its methods: entry, after the method file
+    assert not config("diffuser").visual.plan_xy and config("mctd").visual.plan_xy
+    assert config("diffuser", "visual.episodes=100").visual.episodes == 100  # the command's words come last
+    assert load_config(["env=pointmaze-medium", "method=fast-mctd"]).diffusion.boundary_guidance == 0.0
+    (tmp_path / "env").mkdir()
+    (tmp_path / "method").mkdir()
+    (tmp_path / "env" / "pointmaze-medium.yaml").write_text("methods:\n  fast-mcdt: {jump: 5}\n")
+    (tmp_path / "method" / "fast-mctd.yaml").write_text("jump: 5\n")
+    monkeypatch.setattr(loader, "CONFIG_DIR", tmp_path)
+    with pytest.raises(ConfigError, match="methods.fast-mcdt names no method.*fast-mctd"):
+        load_config(["env=pointmaze-medium", "method=fast-mctd"])
 
 
 def test_plan_statuses_reads_back_what_the_tally_writes():

@@ -62,3 +62,18 @@ def test_the_ant_walks_a_straight_plan_and_clearances_need_an_ant(capsys):
     make = controller_factory(load_config(["env=antmaze-medium", "env.wall_clearance=1.5"]))
     assert job.walk(env, make(plan), start, goal, seed=0, steps=200)
     assert not job.walk(env, make(plan[:1]), start, goal, seed=0, steps=30)  # stays at the start: never reaches
+
+
+def test_a_visual_planner_plans_between_the_frames_seen_at_the_pair(capsys):
+    """On the visual maze the pairs are rendered and encoded as an episode's start and goal; the table's row
+    reads the plan's world path (its own (x, y) at the visual default)."""
+    from conftest import torch_threads
+
+    job = load_job("validation_plans")
+    with torch_threads(1):
+        assert job.main(["env=visual-pointmaze-medium", "method=fast-mctd", "pairs=2",
+                         "settings=[method.budget=10 method.parallel=5]"]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("visual-pointmaze-medium fast-mctd: 2 validation pairs (seed 0)")
+    row = [ln for ln in out.splitlines() if ln.startswith("| method.budget=10")]
+    assert len(row) == 1 and row[0].split(" | ")[1].endswith("/2)")

@@ -52,7 +52,7 @@ def _fake_xy_dataset(episodes: int = 2, steps: int = 1001):
 
 
 def test_plan_xy_adds_two_numbers_per_frame_and_only_on_visual_mazes():
-    latent = load_config([f"env={MEDIUM}", "jump=5"])
+    latent = load_config([f"env={MEDIUM}", "jump=5", "visual.plan_xy=false"])
     assert latent.frame_dim == 8 and latent.checkpoint_dir() == SHIPPED
     cfg = load_config([f"env={MEDIUM}", "jump=5", "visual.plan_xy=true"])
     assert cfg.frame_dim == 10 and cfg.token_dim == 100
@@ -146,7 +146,7 @@ def test_a_widened_model_plans_an_episode_and_configs_must_match_it(tmp_path):
     assert m["token_dim"] == 100 and m["latents"]["plan_xy"] and m["init_from"]["widened_frames"]["to"] == 10
     hooks = hooks_for(MEDIUM)
     with pytest.raises(CheckpointError, match=r"plans \[z, x, y\] frames.*visual.plan_xy=false; set visual.plan_xy"):
-        hooks.check_episodes(load_config([f"env={MEDIUM}", "jump=5", f"checkpoint={out}"]))
+        hooks.check_episodes(load_config([f"env={MEDIUM}", "jump=5", "visual.plan_xy=false", f"checkpoint={out}"]))
     with pytest.raises(CheckpointError, match=r"plans latent frames.*visual.plan_xy=true; set visual.plan_xy=false"):
         hooks.check_episodes(load_config(words + [f"checkpoint={SHIPPED}"]))
     cfg = load_config(words + [f"checkpoint={out}", "method.budget=8", "method.parallel=4"],

@@ -21,21 +21,24 @@ from fmctd_dist.errors import CheckpointError, ConfigError
 
 MEDIUM = "visual-pointmaze-medium"
 SHIPPED = REPO_ROOT / "checkpoints" / f"{MEDIUM}-h5"
+# the paper's latent planners (the visual envs' default plans [z, x, y] frames: configs/env/visual-*.yaml)
+LATENT = "visual.plan_xy=false"
+LATENT_PLANNER = (LATENT, "visual.episodes=20", "diffusion.boundary_guidance=0")  # + the store and guidance they had
 needs_shipped = pytest.mark.skipif(not (SHIPPED / "model.pt").exists(), reason=f"{SHIPPED} is not shipped")
 
 
 def _default_store() -> Path:
-    """The latent store of the default medium config (visual.episodes from its env yaml)."""
+    """The latent store of the paper's latent planners on medium (20 episodes; the Diffusers train on it)."""
     from fmctd_dist.families.visual.config import PartsConfig
     from fmctd_dist.families.visual.latents import latents_dir
 
     vae = json.loads((REPO_ROOT / f"checkpoints/{MEDIUM}-vae/manifest.json").read_text())["digest"]
-    return latents_dir(load_config([f"env={MEDIUM}"]), PartsConfig(), vae) / "latents.npz"
+    return latents_dir(load_config([f"env={MEDIUM}", LATENT, "visual.episodes=20"]), PartsConfig(), vae) / "latents.npz"
 
 
 needs_latents = pytest.mark.skipif(not _default_store().exists(),
-                                   reason="the default medium latent store is not made (jobs/train_visual.py "
-                                          "part=latents env=visual-pointmaze-medium)")
+                                   reason="the 20-episode medium latent store is not made (jobs/train_visual.py "
+                                          "part=latents env=visual-pointmaze-medium visual.episodes=20)")
 
 
 def _fake_dataset(d: int = 8, episodes: int = 2, steps: int = 1001):
@@ -53,7 +56,7 @@ def test_latent_windows_have_the_planner_shape(jump, tokens):
     """Windows of 8-D latents at H=5 and H=1: [B, horizon / (H * frame_stack) + 1, 8 * frame_stack]."""
     from fmctd_dist.data.windows import train_data
 
-    cfg = load_config([f"env={MEDIUM}", f"jump={jump}"], method="mctd")
+    cfg = load_config([f"env={MEDIUM}", f"jump={jump}", LATENT], method="mctd")
     assert cfg.frame_dim == 8 and cfg.token_dim == 80 and cfg.n_tokens == tokens
     ds = _fake_dataset()
     data = train_data(cfg, ds)
@@ -75,7 +78,7 @@ def test_position_readout_reads_latent_frames_as_the_estimator_does():
     """train.boundary_space=position on latents: normalised frames -> the estimator's standardised (x, y)."""
     from fmctd_dist.families.visual.guide import Positions, load_estimator_net
 
-    cfg = load_config([f"env={MEDIUM}", "jump=1"], method="mctd")
+    cfg = load_config([f"env={MEDIUM}", "jump=1", LATENT], method="mctd")
     ds = _fake_dataset()
     readout, prov = ds.position_readout(cfg)
     assert prov["estimator_digest"] and prov["estimator"].endswith(f"{MEDIUM}-estimator")
@@ -199,29 +202,30 @@ def test_bad_inputs_are_one_clear_error_each(tmp_path):
     from fmctd_dist.families import hooks_for
 
     hooks = hooks_for(MEDIUM)
-    cfg = load_config([f"env={MEDIUM}", "jump=5"])
+    cfg = load_config([f"env={MEDIUM}", "jump=5", LATENT])
     assert hooks.check_episodes(cfg) == json.loads(
         (REPO_ROOT / f"checkpoints/{MEDIUM}-invdyn/manifest.json").read_text())["digest"]
     # a point maze model given to the visual env: the field, the value and the fix
     with pytest.raises(CheckpointError, match=r"env\.name.*pointmaze-medium.*visual-pointmaze-medium"):
-        hooks.check_episodes(load_config([f"env={MEDIUM}", "jump=5", "checkpoint=checkpoints/pointmaze-medium-h5"]))
+        hooks.check_episodes(load_config([f"env={MEDIUM}", "jump=5", LATENT,
+                                          "checkpoint=checkpoints/pointmaze-medium-h5"]))
     # a planner trained on another VAE's latents
     other = _copy_planner(tmp_path, **{"latents.vae_digest": "0123456789abcdef"})
     with pytest.raises(CheckpointError, match=r"latents.vae_digest='0123456789abcdef'.*cf40771aa26c8504.*retrain"):
-        hooks.check_episodes(load_config([f"env={MEDIUM}", "jump=5", f"checkpoint={other}"]))
+        hooks.check_episodes(load_config([f"env={MEDIUM}", "jump=5", LATENT, f"checkpoint={other}"]))
     # a planner of another latent size
     shutil.rmtree(other)
     small = _copy_planner(tmp_path, **{"latents.latent_dim": 3})
     with pytest.raises(CheckpointError, match=r"latent size.*3-D.*vae.latent_dim=8"):
-        hooks.check_episodes(load_config([f"env={MEDIUM}", "jump=5", f"checkpoint={small}"]))
+        hooks.check_episodes(load_config([f"env={MEDIUM}", "jump=5", LATENT, f"checkpoint={small}"]))
     shutil.rmtree(small)
     # a state-space manifest without latents provenance
     bare = _copy_planner(tmp_path, latents=None)
     with pytest.raises(CheckpointError, match=r"no latents.vae_digest.*jobs/train.py env=visual-pointmaze-medium"):
-        hooks.check_episodes(load_config([f"env={MEDIUM}", "jump=5", f"checkpoint={bare}"]))
+        hooks.check_episodes(load_config([f"env={MEDIUM}", "jump=5", LATENT, f"checkpoint={bare}"]))
     # the value's warp threshold on estimated positions: the maze's by default, env.warp_sparse when set
     assert hooks.plan_rules(cfg).value.maze.warp_threshold == cfg.method.warp_threshold == 2.0
-    wide = load_config([f"env={MEDIUM}", "jump=5", "env.warp_sparse=8.0"])
+    wide = load_config([f"env={MEDIUM}", "jump=5", LATENT, "env.warp_sparse=8.0"])
     assert hooks.plan_rules(wide).value.maze.warp_threshold == 8.0
     # latents of the wrong size handed to the value's estimator
     with pytest.raises(CheckpointError, match="8-D latents"):
@@ -242,7 +246,7 @@ def test_fast_mctd_solves_task1_seed0_with_the_shipped_models():
     from fmctd_dist.families import guide_map, hooks_for, plan_rules
     from fmctd_dist.planners import make_planner
 
-    cfg = load_config([f"env={MEDIUM}", "method=fast-mctd", "env.warp_sparse=8.0"])
+    cfg = load_config([f"env={MEDIUM}", "method=fast-mctd", "env.warp_sparse=8.0", *LATENT_PLANNER])
     with torch_threads(1):
         denoiser = LocalDenoiser.from_checkpoint(cfg.checkpoint_dir(), cfg, guide_map=guide_map(MEDIUM))
         planner = make_planner(cfg, denoiser, normaliser_from_manifest(read_manifest(cfg.checkpoint_dir())),
@@ -256,6 +260,26 @@ def test_fast_mctd_solves_task1_seed0_with_the_shipped_models():
     assert row["goal_xy_estimate_error"] < 2.0  # the goal frame's latent reads near the goal
     assert row["success"], f"not solved: {row['plan_status']} after {row['env_steps']} steps (results 13.4: 187)"
     assert row["plan_status"] == "early_stop" and row["env_steps"] < 300  # one kept plan, found before the budget
+
+
+@needs_shipped
+def test_fast_mctd_at_the_visual_default_solves_task3_seed0():
+    """The visual medium maze's default Fast-MCTD ([z, x, y] frames, boundary guidance 8, the maze's warp
+    threshold) solves task 3 seed 0 from images. The default's own grid (run visual-s32-bg8, an AMD EPYC)
+    reached it in 114 steps, an Intel Xeon in 238: the steps are a CPU's (docs/design.md §7), success is not."""
+    from fmctd_dist.denoiser.local import LocalDenoiser
+    from fmctd_dist.diffusion.checkpoint import normaliser_from_manifest, read_manifest
+    from fmctd_dist.families import guide_map, hooks_for, plan_rules
+    from fmctd_dist.planners import make_planner
+
+    cfg = load_config([f"env={MEDIUM}", "method=fast-mctd"])
+    assert cfg.visual.plan_xy and cfg.diffusion.boundary_guidance == 8.0
+    with torch_threads(1):
+        denoiser = LocalDenoiser.from_checkpoint(cfg.checkpoint_dir(), cfg, guide_map=guide_map(MEDIUM))
+        planner = make_planner(cfg, denoiser, normaliser_from_manifest(read_manifest(cfg.checkpoint_dir())),
+                               plan_rules(cfg))
+        row = hooks_for(MEDIUM).episodes(cfg).run(planner, 3, 0)
+    assert row["success"], f"not solved: {row['plan_status']} after {row['env_steps']} steps"
 
 
 @needs_shipped
@@ -305,7 +329,7 @@ def test_plan_quality_reports_warps_and_manifold_distance():
     probe = load_job("visual_plan_quality")
     nearest_distance, plan_quality = probe.nearest_distance, probe.plan_quality
     assert nearest_distance(np.array([[0.0, 0.0], [3.0, 4.0]]), np.array([[0.0, 1.0], [3.0, 0.0]])).tolist() == [1, 4]
-    cfg = load_config([f"env={MEDIUM}", "method=fast-mctd", "method.budget=10", "method.parallel=5"])
+    cfg = load_config([f"env={MEDIUM}", "method=fast-mctd", "method.budget=10", "method.parallel=5", *LATENT_PLANNER])
     with torch_threads(1):
         q = plan_quality(cfg, [3])
     (row,) = q["tasks"]

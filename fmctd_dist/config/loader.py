@@ -28,6 +28,8 @@ from fmctd_dist.registry import env_config_dir
 ALIASES = {"tasks": "eval.tasks", "seeds": "eval.seeds", "runner": "eval.runner"}
 # Keys whose value names a YAML file under configs/<group>/ instead of a plain value.
 GROUPS = ("env", "method")
+# The env file's section of per-method settings (:func:`group_layers`).
+METHODS_KEY = "methods"
 # fields that existed once: a stored config (a manifest, a row) that holds one still loads, without it; a
 # command that sets one is told why it is gone
 RETIRED = {"eval.resume_mixed": "removed in session 26: a run directory never mixes configs or checkpoints "
@@ -144,8 +146,24 @@ def from_dict(schema: type, d: dict[str, Any]) -> Any:
 
 
 def group_layers(env: str, method: str) -> Iterable[tuple[Any, str]]:
-    """(YAML node, where) of the env then the method group file, each read when its turn comes."""
-    return ((_group_file(group, name), f"configs/{group}") for group, name in (("env", env), ("method", method)))
+    """(YAML node, where) of the env file, the method file, then the env file's own settings for that method.
+
+    An env file may hold a ``methods:`` section, ``{method name: settings}``, applied after the method's file:
+    the defaults one method has on one env (the visual maze's Diffusers keep the paper's latent frames there
+    while its other planners plan [z, x, y]), so every (method, env) still has exactly one default config."""
+    env_node = _group_file("env", env)
+    per_method = env_node.pop(METHODS_KEY, None) if METHODS_KEY in env_node else None
+    yield env_node, "configs/env"
+    yield _group_file("method", method), "configs/method"
+    if per_method is not None:
+        names = group_names("method")
+        for name in per_method:
+            if name not in names:
+                raise ConfigError(f"configs/env/{env}.yaml: {METHODS_KEY}.{name} names no method"
+                                  f"{did_you_mean(str(name), names)}; the section's keys are method names: "
+                                  f"{', '.join(names)}")
+        if method in per_method:
+            yield per_method[method], f"configs/env/{env}.yaml {METHODS_KEY}.{method}"
 
 
 def planner_config(groups: dict[str, str], dotted: Words, env: str, method: str) -> Config:

@@ -10,6 +10,11 @@ scores what the search hands the controller.
     python jobs/probes/validation_plans.py env=antmaze-large method=fast-mctd pairs=20 \
         'settings=[method.wall_guidance=0, method.wall_guidance=1 method.wall_margin=1]'   # words of a setting: spaces
 
+On the visual maze (``env=visual-pointmaze-medium``) the planner plans between the encoded chase-camera
+frames at the start and the goal, as an episode does, and the plan's world path is its own (x, y) with
+``visual.plan_xy`` or the position estimator's reading of its latents otherwise; the start of that path is
+the planner's own reading of the start frame (what the value tests), the goal the true one.
+
 On AntMaze, ``clearances=[0,1.5]`` also walks each plan with the ant (its low-level policy, ``env.max_steps``
 steps, the controller's copy of the plan kept ``env.wall_clearance`` off the walls) and adds the share of
 ants that reached the goal per clearance: the plan is made once and walked once per clearance, so the
@@ -23,17 +28,53 @@ import time
 import numpy as np
 
 from fmctd_dist.cli import run
-from fmctd_dist.config import is_ant, load_config
+from fmctd_dist.config import Config, is_ant, load_config
 from fmctd_dist.denoiser.local import LocalDenoiser
 from fmctd_dist.diffusion.checkpoint import normaliser_from_manifest, read_manifest
 from fmctd_dist.errors import ConfigError
 from fmctd_dist.families import guide_map, hooks_for
+from fmctd_dist.family import warp_threshold
 from fmctd_dist.families.maze.antmaze import AntMaze
 from fmctd_dist.families.maze.geometry import MazeGeometry, maze_geometry
 from fmctd_dist.families.maze.make import make_env
 from fmctd_dist.families.maze.robots import Controller, controller_factory
 from fmctd_dist.planners.base import plan_seed
 from fmctd_dist.planners.factory import make_planner
+from fmctd_dist.registry import family
+
+VISUAL = "visual-pointmaze"
+
+
+class MazeEnds:
+    """A maze planner's ends are the cells' (x, y), and its plan is its world path."""
+
+    def __init__(self, cfg: Config):
+        manifest = read_manifest(cfg.checkpoint_dir())
+        denoiser = LocalDenoiser.from_checkpoint(cfg.checkpoint_dir(), cfg, guide_map=guide_map(cfg.env.name))
+        self.planner = make_planner(cfg, denoiser, normaliser_from_manifest(manifest),
+                                    hooks_for(cfg.env.name).plan_rules(cfg))
+
+    def frame(self, xy: np.ndarray) -> np.ndarray:
+        return xy
+
+    def world(self, frames: np.ndarray) -> np.ndarray:
+        return np.asarray(frames)
+
+
+class VisualEnds:
+    """A visual planner's ends are the encoded frames the chase camera sees there, as in an episode."""
+
+    def __init__(self, cfg: Config):
+        from visual_plan_quality import visual_planner  # this folder's probe: the planner and parts an episode uses
+
+        self.planner, self.parts, _, _ = visual_planner(cfg)
+
+    def frame(self, xy: np.ndarray) -> np.ndarray:
+        image = self.parts.env.frames.render(np.asarray(xy, np.float64)[None])
+        return self.parts.frames.of_latents(self.parts.vae.encode(image)[0])
+
+    def world(self, frames: np.ndarray) -> np.ndarray:
+        return self.parts.frames(frames)
 
 
 def validation_pairs(geo: MazeGeometry, n: int, seed: int = 0) -> list[tuple[tuple[int, int], tuple[int, int]]]:
@@ -90,7 +131,10 @@ def main(argv: list[str]) -> int:
     if clearances and not is_ant(opts["env"]):
         raise ConfigError(f"validation_plans: clearances={opts['clearances']} walks the plans with the ant; "
                           f"env={opts['env']} is not an AntMaze. Drop clearances")
-    geo = maze_geometry(opts["env"])
+    visual = family(opts["env"]) == VISUAL
+    if visual:
+        from fmctd_dist.families.visual.env import point_env_name
+    geo = maze_geometry(point_env_name(opts["env"]) if visual else opts["env"])
     pairs = validation_pairs(geo, int(opts["pairs"]), int(opts["seed"]))
     print(f"{opts['env']} {opts['method']}: {len(pairs)} validation pairs (seed {opts['seed']})", flush=True)
     walked = "".join(f" ant reached, clearance {c:g} |" for c in clearances)
@@ -100,18 +144,16 @@ def main(argv: list[str]) -> int:
     walkers = [controller_factory(load_config([f"env={opts['env']}", f"env.wall_clearance={c}"])) for c in clearances]
     for setting in settings:
         cfg = load_config([f"env={opts['env']}", f"method={opts['method']}", "eval.threads=1"] + setting.split())
-        manifest = read_manifest(cfg.checkpoint_dir())
-        denoiser = LocalDenoiser.from_checkpoint(cfg.checkpoint_dir(), cfg, guide_map=guide_map(cfg.env.name))
-        rules = hooks_for(cfg.env.name).plan_rules(cfg)
-        planner = make_planner(cfg, denoiser, normaliser_from_manifest(manifest), rules)
+        ends = VisualEnds(cfg) if visual else MazeEnds(cfg)
         tally, reached, seconds = [], np.zeros(len(clearances)), 0.0
         for k, (a, b) in enumerate(pairs):
             start, goal = geo.cell_to_xy(a), geo.cell_to_xy(b)
+            first, last = ends.frame(start), ends.frame(goal)
             t0 = time.perf_counter()
-            out = planner.plan(start, goal, plan_seed(cfg.seed, 1000 + k))
+            out = ends.planner.plan(first, last, plan_seed(cfg.seed, 1000 + k))
             seconds += time.perf_counter() - t0
-            tally.append(plan_success(out.waypoints, start, goal, cfg.jump, cfg.method.warp_threshold,
-                                      cfg.method.goal_radius, geo))
+            tally.append(plan_success(ends.world(out.waypoints), ends.world(first), goal, cfg.jump,
+                                      warp_threshold(cfg), cfg.method.goal_radius, geo))
             for i, make in enumerate(walkers):
                 reached[i] += walk(env, make(out.waypoints), start, goal, k, cfg.env.max_steps)
         v, r = np.array(tally).T

@@ -1,25 +1,27 @@
-"""The visual maze table (issue 21): the paper's Table "Visual maze results", generated from archived rows.
+"""The visual maze table (issue 21): the paper's Table "Visual maze results", one line per method and maze.
 
-The maze tables take one run (``main``) on today's default configs. The visual lines cannot: each cell
-was run on the model and settings docs/results.md section 13 chose for it (the paper's latent planner, or
-our [z, x, y] frames; the maze rule's warp threshold, or a wider one), over many sessions. So
-:data:`VISUAL_LINES` names the run of each line, and every line prints what its rows' config changes
-against the method's default (``load_config([env, method])``) and which weights made it, so no cell
-hides its settings and a line is never averaged with another config or checkpoint (one line per
-identity, :func:`fmctd_dist.evaluation.results.summarise`).
+Like the maze tables, a cell holds only episodes made with today's default config of its (method, env)
+(``configs/env/visual-pointmaze-*.yaml``, its ``methods:`` section included) on today's shipped planner and
+inverse dynamics, from any archived run (:func:`fmctd_dist.evaluation.report.current_rows`). One rule is
+the visual table's own, for rows made before these defaults existed: a row whose config names the shipped
+planner's directory (or another copy of the same weights) in ``checkpoint=`` counts as a default row when its
+weights' digest is the shipped one, because a path only says where the weights were read and the digest says
+what they are. Every other difference keeps a row out of the table: its run stays in the archive and in the
+notebook (docs/notebook/visual-maze.md).
 """
 
 from __future__ import annotations
 
+import json
 from collections import Counter
-from dataclasses import dataclass
 from functools import lru_cache
 from typing import Any
 
 from fmctd_dist.config import Config, load_config
-from fmctd_dist.evaluation.identity import changed_fields, row_identity
+from fmctd_dist.evaluation.identity import changed_fields, config_hash
 from fmctd_dist.evaluation.paper import paper_cell
 from fmctd_dist.evaluation.plan_tally import plan_statuses
+from fmctd_dist.evaluation.report import current_rows
 from fmctd_dist.evaluation.results import summarise
 from fmctd_dist.families.visual.record import VISUAL_ENVS, VISUAL_METHODS
 
@@ -27,55 +29,64 @@ from fmctd_dist.families.visual.record import VISUAL_ENVS, VISUAL_METHODS
 _NAMES = ("env.name", "method.name")
 
 
-@dataclass(frozen=True)
-class VisualLine:
-    """One line of the table: a method on a maze, read from one run (section 13 cites the command)."""
-
-    method: str
-    env: str
-    run: str
-    note: str = ""  # why this line is in the table (e.g. "the paper's latent planner")
-    episodes: int = 0  # the grid its run is meant to fill, for a run still going (0: the tasks x seeds its rows cover)
-
-
-# The lines of today's table, in the paper's order. A method x maze may have several (the paper's own
-# setting beside our best one); a pair with none prints "not run".
-VISUAL_LINES: tuple[VisualLine, ...] = (
-    VisualLine("diffuser", "visual-pointmaze-medium", "visual-methods-s14"),
-    VisualLine("diffuser-replan", "visual-pointmaze-medium", "visual-methods-s14"),
-    VisualLine("diffusion-forcing", "visual-pointmaze-medium", "visual-s29-default", "latent, H=5"),
-    VisualLine("diffusion-forcing", "visual-pointmaze-medium", "visual-s31-xy-dense", "[z, x, y], H=1"),
-    VisualLine("mctd", "visual-pointmaze-medium", "visual-s30-side", "latent"),
-    VisualLine("p-mctd", "visual-pointmaze-medium", "visual-s33-default", "latent"),
-    VisualLine("s-mctd", "visual-pointmaze-medium", "visual-s29-default-warp8", "latent, warp 8"),
-    VisualLine("fast-mctd", "visual-pointmaze-medium", "visual-s29-default", "latent, the maze rule"),
-    VisualLine("fast-mctd", "visual-pointmaze-medium", "visual-s32-bg8", "[z, x, y] + boundary guidance"),
-    VisualLine("mctd-replan", "visual-pointmaze-medium", "visual-replan-medium-xy", "[z, x, y]", episodes=10),
-    VisualLine("fast-mctd-replan", "visual-pointmaze-medium", "visual-s29-default-warp8", "latent, warp 8"),
-    VisualLine("diffuser", "visual-pointmaze-large", "visual-methods-s14"),
-    VisualLine("diffuser-replan", "visual-pointmaze-large", "visual-methods-s14"),
-    VisualLine("diffusion-forcing", "visual-pointmaze-large", "visual-s35-large-xy-h5", "[z, x, y], H=5"),
-    VisualLine("diffusion-forcing", "visual-pointmaze-large", "visual-s35-large-xy", "[z, x, y], H=1"),
-    VisualLine("mctd", "visual-pointmaze-large", "visual-s35-large-xy", "[z, x, y]"),
-    VisualLine("p-mctd", "visual-pointmaze-large", "visual-s35-large-xy", "[z, x, y]"),
-    VisualLine("s-mctd", "visual-pointmaze-large", "visual-s35-large-xy-bg8", "[z, x, y] + boundary guidance"),
-    VisualLine("fast-mctd", "visual-pointmaze-large", "visual-s33-large-xy-bg8", "[z, x, y] + boundary guidance"),
-    VisualLine("mctd-replan", "visual-pointmaze-large", "visual-replan-large-xy", "[z, x, y]", episodes=10),
-    VisualLine("fast-mctd-replan", "visual-pointmaze-large", "visual-s35-large-xy-bg8",
-               "[z, x, y] + boundary guidance"),
-)
-
-
 @lru_cache(maxsize=None)
-def _default_config(method: str, env: str) -> Config:
+def default_config(method: str, env: str) -> Config:
     return load_config([f"env={env}", f"method={method}"])
 
 
-def settings(row: dict[str, Any]) -> str:
-    """What the row's config changes against its method's default on its env, e.g.
-    ``visual.plan_xy=True, diffusion.boundary_guidance=8.0`` ("default" when nothing)."""
-    diff = changed_fields(row, _default_config(row["method"], row["env"]))
-    return ", ".join(f"{k}={a}" for k, (a, _) in diff.items() if k not in _NAMES) or "default"
+@lru_cache(maxsize=None)
+def shipped(method: str, env: str) -> tuple[str, str]:
+    """(planner digest, inverse dynamics digest) of the default config's checkpoints today ("" when absent)."""
+    from fmctd_dist.families.visual.config import part_dir
+
+    cfg = default_config(method, env)
+    out = []
+    for path in (cfg.checkpoint_dir(), part_dir(cfg, "", "invdyn")):
+        manifest = path / "manifest.json"
+        out.append(json.loads(manifest.read_text()).get("digest", "") if manifest.is_file() else "")
+    return out[0], out[1]
+
+
+def at_default(row: dict[str, Any]) -> bool:
+    """Was ``row`` made with its (method, env)'s default config on today's shipped weights (module docstring)?"""
+    planner, invdyn = shipped(row["method"], row["env"])
+    if row.get("checkpoint_digest") != planner or (row.get("policy_digest") or "") != invdyn:
+        return False
+    diff = changed_fields(row, default_config(row["method"], row["env"]))
+    return not set(diff) - {*_NAMES, "checkpoint"}
+
+
+def default_rows(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The visual rows at their default (:func:`at_default`), each carrying its default's config hash, so the
+    rows of one (method, env) form one identity whichever way their run named the shipped checkpoint."""
+    return [{**r, "config_hash": config_hash(default_config(r["method"], r["env"]))}
+            for r in rows if r["env"] in VISUAL_ENVS and r["method"] in VISUAL_METHODS and at_default(r)]
+
+
+def training(cfg: Config) -> str:
+    """What the default planner saw against the paper's training: windows (steps x batch over its whole lineage of
+    continued runs) and train episodes in its latent store, e.g. ``9.4 M windows (4.6%), 100 episodes``."""
+    from fmctd_dist.diffusion.train import PAPER_TRAINING
+
+    path = cfg.checkpoint_dir() / "manifest.json"
+    if not path.is_file():
+        return "not on this machine"
+    m = json.loads(path.read_text())
+    paper = PAPER_TRAINING[m.get("model_kind", "df")]
+    seen = m.get("lineage_samples") or int(m["train_steps"]) * int(m["config"]["train"]["batch_size"])
+    episodes = m.get("latents", {}).get("episodes") or []
+    return (f"{seen / 1e6:.1f} M windows ({100 * seen / (paper['steps'] * paper['batch_size']):.1f}%), "
+            f"{len(episodes)} episodes")
+
+
+def deviations(cfg: Config) -> str:
+    """What the default plans differently from the paper's visual planners (latent frames, no extra guidance)."""
+    out = ["[z, x, y] frames" if cfg.visual.plan_xy else "latent frames (the paper's)"]
+    if cfg.diffusion.boundary_guidance > 0:
+        out.append(f"boundary guidance {cfg.diffusion.boundary_guidance:g}")
+    if cfg.env.warp_dense or cfg.env.warp_sparse:
+        out.append(f"warp threshold {cfg.env.warp_dense if cfg.jump == 1 else cfg.env.warp_sparse:g}")
+    return ", ".join(out)
 
 
 def search_statuses(rows: list[dict[str, Any]]) -> str:
@@ -88,36 +99,31 @@ def search_statuses(rows: list[dict[str, Any]]) -> str:
     return ", ".join(f"{k} {v}" for k, v in counts.most_common())
 
 
-def visual_table(rows: list[dict[str, Any]], lines: tuple[VisualLine, ...] = VISUAL_LINES) -> str:
-    """Markdown: per maze, the paper's methods in its order, each :data:`VISUAL_LINES` line summarised from
-    the rows of its run, with its settings, weights and run beside the paper's cell."""
+def visual_table(rows: list[dict[str, Any]]) -> str:
+    """Markdown: per maze, the paper's methods in its order, each summarised from its default rows (any run),
+    with its model, what its default changes against the paper, its runs and the paper's cell."""
+    hashes = {(m, e): config_hash(default_config(m, e)) for e in VISUAL_ENVS for m in VISUAL_METHODS}
+    mine, _ = current_rows(default_rows(rows), hashes)
     out = ["| method | maze | episodes (tasks x seeds) | success (%) | per task | planning s per episode | "
-           "searches' status | model: digest, jump | settings against the method's default | run | "
+           "searches' status | model: digest, jump | its training (of the paper's) | ours against the paper | runs | "
            "paper: success / time (GPU) |",
-           "|---|---|---|---|---|---|---|---|---|---|---|"]
+           "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for env in VISUAL_ENVS:
         maze = env.rsplit("-", 1)[1]
         for method in VISUAL_METHODS:
-            mine = [ln for ln in lines if ln.method == method and ln.env == env]
-            paper = paper_cell(method, env)
-            if not mine:
-                out.append(f"| {method} | {maze} | not run | | | | | | | | {paper} |")
-            for ln in mine:
-                rs = [r for r in rows if r["run"] == ln.run and r["method"] == method and r["env"] == env]
-                if not rs:
-                    out.append(f"| {method} | {maze} | no rows yet | | | | | | | `{ln.run}` | {paper} |")
-                    continue
-                for s in summarise(rs):  # one line per config / checkpoint, never averaged together
-                    line_rows = [r for r in rs if row_identity(r) == s["identity"]]
-                    one = line_rows[0]
-                    name = f"{method} ({ln.note})" if ln.note else method
-                    per_task = "/".join(f"{v:.0f}" for v in s["per_task"].values())
-                    grid = max(ln.episodes, len(s["per_task"]) * s["seeds"])  # a run still going fills part of it
-                    partial = f", partial: {s['episodes']} of {grid}" if s["episodes"] < grid else ""
-                    out.append(
-                        f"| {name} | {maze} | {s['episodes']} ({len(s['per_task'])} x {s['seeds']}{partial}) | "
-                        f"{s['success']:.0f} ± {s['success_std']:.0f} | {per_task} | "
-                        f"{s['plan_time_s']:.1f} ± {s['plan_time_std']:.1f} | {search_statuses(line_rows)} | "
-                        f"`{str(s['checkpoint_digest'])[:8]}`, H={one.get('jump')} | {settings(one)} | "
-                        f"`{ln.run}` | {paper} |")
+            cfg, paper = default_config(method, env), paper_cell(method, env)
+            rs = [r for r in mine if r["method"] == method and r["env"] == env]
+            if not rs:
+                out.append(f"| {method} | {maze} | no episodes at the default yet | | | | | | {training(cfg)} | "
+                           f"{deviations(cfg)} | | {paper} |")
+                continue
+            s = summarise(rs)[0]  # one identity by construction (default_rows)
+            per_task = "/".join(f"{v:.0f}" for v in s["per_task"].values())
+            runs = ", ".join(f"`{run}`" for run in sorted({r["run"] for r in rs}))
+            out.append(
+                f"| {method} | {maze} | {s['episodes']} ({len(s['per_task'])} x {s['seeds']}) | "
+                f"{s['success']:.0f} ± {s['success_std']:.0f} | {per_task} | "
+                f"{s['plan_time_s']:.1f} ± {s['plan_time_std']:.1f} | {search_statuses(rs)} | "
+                f"`{str(s['checkpoint_digest'])[:8]}`, H={cfg.jump} | {training(cfg)} | {deviations(cfg)} | {runs} | "
+                f"{paper} |")
     return "\n".join(out)
