@@ -35,7 +35,7 @@ case "$ONLY" in all|antmaze) table "" antmaze-medium antmaze-large antmaze-giant
 case "$ONLY" in all|cubes) table -replan cube-single cube-double cube-triple;; esac
 # the visual maze runs in process (its episodes render frames; MUJOCO_GL=egl on a headless machine)
 case "$ONLY" in all|visual) for env in visual-pointmaze-medium visual-pointmaze-large; do
-  for m in fast-mctd s-mctd diffuser diffusion-forcing mctd p-mctd mctd-replan; do
+  for m in fast-mctd s-mctd diffuser diffuser-replan diffusion-forcing mctd p-mctd fast-mctd-replan mctd-replan; do
     python jobs/eval.py runner=local method=$m env=$env eval.run=main seeds="$SEEDS" || true
   done; done;; esac
 

@@ -125,9 +125,9 @@ def main(argv: list[str]) -> int:
     for table in tables().values():
         if f"<!-- report:{table.name} -->" not in text:
             continue
-        if table.render:  # a table with its own layout (the visual maze: each line's model and settings)
+        if table.render:  # a table with its own layout (the visual maze: each line's model and training)
             module, _, fn = table.render.partition(":")
-            sections[table.name] = getattr(importlib.import_module(module), fn)(archived_rows)
+            sections[table.name] = getattr(importlib.import_module(module), fn)(main_rows + archived_rows)
             continue
         hashes, digests = today(list(table.envs), list(table.methods))
         shipped |= digests
