@@ -286,9 +286,9 @@ def test_visual_table_reads_each_method_at_its_default_and_the_shipped_weights_o
               "run": "visual-z"} for k in (1, 2)]  # older weights
     table = visual_table(rows)
     saw = training(default_config("fast-mctd", env))
-    assert ("| fast-mctd | large | 6 (2 x 3) | 67 ± 24 | 100/33 | 1.0 ± 0.0 | stay 4, early_stop 2, achieved 2 | "
-            f"`{planner[:8]}`, H=5 | {saw} | [z, x, y] frames, boundary guidance 8 | `visual-x`, `visual-y` | "
-            "32 / 5.1 s |") in table
+    assert ("| fast-mctd | large | 6 (2 x 3, 2 of 5 tasks so far) | 67 ± 24 | 100/33 | 1.0 ± 0.0 | "
+            f"stay 4, early_stop 2, achieved 2 | `{planner[:8]}`, H=5 | {saw} | "
+            "[z, x, y] frames, boundary guidance 8 | `visual-x`, `visual-y` | 32 / 5.1 s |") in table
     assert saw.endswith("%), 100 episodes")  # its latent store: 100 train episodes
     assert table.count("| fast-mctd | large |") == 1  # one line per method and maze
     assert "| s-mctd | large | no episodes at the default yet |" in table

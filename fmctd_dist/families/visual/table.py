@@ -120,8 +120,10 @@ def visual_table(rows: list[dict[str, Any]]) -> str:
             s = summarise(rs)[0]  # one identity by construction (default_rows)
             per_task = "/".join(f"{v:.0f}" for v in s["per_task"].values())
             runs = ", ".join(f"`{run}`" for run in sorted({r["run"] for r in rs}))
+            tasks = len(s["per_task"])
+            partial = f", {tasks} of {len(cfg.eval.tasks)} tasks so far" if tasks < len(cfg.eval.tasks) else ""
             out.append(
-                f"| {method} | {maze} | {s['episodes']} ({len(s['per_task'])} x {s['seeds']}) | "
+                f"| {method} | {maze} | {s['episodes']} ({tasks} x {s['seeds']}{partial}) | "
                 f"{s['success']:.0f} ± {s['success_std']:.0f} | {per_task} | "
                 f"{s['plan_time_s']:.1f} ± {s['plan_time_std']:.1f} | {search_statuses(rs)} | "
                 f"`{str(s['checkpoint_digest'])[:8]}`, H={cfg.jump} | {training(cfg)} | {deviations(cfg)} | {runs} | "
