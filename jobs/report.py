@@ -29,8 +29,6 @@ alone with ``--checkpoints``; tests/test_checkpoint_index.py holds the committed
 from __future__ import annotations
 
 import importlib
-import json
-from pathlib import Path
 
 import pyarrow as pa
 import pyarrow.parquet as pq
@@ -42,7 +40,7 @@ from fmctd_dist.config import REPO_ROOT, Config, load_config, resolve_path
 from fmctd_dist.evaluation.identity import config_hash
 from fmctd_dist.evaluation.plots import plot_ablation, plot_success_vs_time
 from fmctd_dist.evaluation.report import ABLATIONS, ablation_summary, ablation_table, current_rows, fill_markers, \
-    glance_table, load_rows, merge_rows, paper_table, row_key, superseded
+    glance_table, load_rows, manifest_digest, merge_rows, paper_table, row_key, superseded
 from fmctd_dist.registry import tables
 from fmctd_dist.evaluation.results import markdown_table, summarise
 from fmctd_dist.errors import ConfigError
@@ -67,8 +65,7 @@ def parse(argv: list[str]) -> dict[str, str]:
 
 def shipped_digest(cfg: Config) -> str:
     """The digest of the checkpoint ``cfg`` names today ("" when it is not on this machine)."""
-    path = cfg.checkpoint_dir() / "manifest.json"
-    return json.loads(path.read_text()).get("digest", "") if path.exists() else ""
+    return manifest_digest(cfg.checkpoint_dir())
 
 
 def today(envs: list[str], methods: list[str]) -> tuple[dict[tuple[str, str], str], dict[tuple[str, str], str]]:
@@ -100,8 +97,7 @@ def main(argv: list[str]) -> int:
 
     main_rows = merge_rows(committed, fresh, "main")
     all_rows += main_rows
-    every_shipped = {json.loads(m.read_text()).get("digest")
-                     for m in (REPO_ROOT / "checkpoints").glob("*/manifest.json")}
+    every_shipped = {manifest_digest(m.parent) for m in (REPO_ROOT / "checkpoints").glob("*/manifest.json")}
     for ab in ABLATIONS:
         rows = merge_rows(committed, fresh, ab.name)
         all_rows += rows

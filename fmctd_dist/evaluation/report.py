@@ -10,6 +10,7 @@ prose around them stays hand-written and the numbers stay generated.
 
 from __future__ import annotations
 
+import json
 import re
 from collections import Counter
 from dataclasses import dataclass
@@ -24,6 +25,13 @@ from fmctd_dist.registry import env_names
 from fmctd_dist.evaluation.paper import paper_cell
 from fmctd_dist.evaluation.identity import row_identity
 from fmctd_dist.evaluation.results import label, summarise
+
+def manifest_digest(checkpoint_dir: Path) -> str:
+    """The digest a checkpoint directory's manifest records ("" when it is not on this machine): what a table
+    compares a row's ``checkpoint_digest`` with to tell today's shipped weights from replaced ones."""
+    path = Path(checkpoint_dir) / "manifest.json"
+    return json.loads(path.read_text()).get("digest", "") if path.is_file() else ""
+
 
 @dataclass(frozen=True)
 class Ablation:

@@ -21,7 +21,7 @@ from fmctd_dist.config import Config, load_config
 from fmctd_dist.evaluation.identity import changed_fields, config_hash
 from fmctd_dist.evaluation.paper import paper_cell
 from fmctd_dist.evaluation.plan_tally import plan_statuses
-from fmctd_dist.evaluation.report import current_rows
+from fmctd_dist.evaluation.report import current_rows, manifest_digest
 from fmctd_dist.evaluation.results import summarise
 from fmctd_dist.families.visual.record import VISUAL_ENVS, VISUAL_METHODS
 
@@ -40,11 +40,7 @@ def shipped(method: str, env: str) -> tuple[str, str]:
     from fmctd_dist.families.visual.config import part_dir
 
     cfg = default_config(method, env)
-    out = []
-    for path in (cfg.checkpoint_dir(), part_dir(cfg, "", "invdyn")):
-        manifest = path / "manifest.json"
-        out.append(json.loads(manifest.read_text()).get("digest", "") if manifest.is_file() else "")
-    return out[0], out[1]
+    return manifest_digest(cfg.checkpoint_dir()), manifest_digest(part_dir(cfg, "", "invdyn"))
 
 
 def at_default(row: dict[str, Any]) -> bool:
