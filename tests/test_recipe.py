@@ -18,7 +18,7 @@ from fmctd_dist.diffusion.checkpoint import load_checkpoint
 from fmctd_dist.diffusion.model import DFTransformer
 from fmctd_dist.diffusion.sampler import GUIDANCE_GAIN, goal_reward, make_consts, transition
 from fmctd_dist.diffusion.schedule import PyramidSchedule
-from fmctd_dist.diffusion.train import DFLoss, boundary_loss, lr_at, position_loss, train, validation_loss
+from fmctd_dist.diffusion.train import DFLoss, boundary_loss, lr_at, position_loss, train, validation_loss, wall_loss
 from fmctd_dist.errors import CheckpointError, ConfigError
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
@@ -33,12 +33,13 @@ LEVERS = {"model.param=v": ("model", "param"), "model.param=v_offset": ("model",
           "train.clean_context=0.5": ("train", "clean_context")}
 MODEL_LEVERS = ("model.param=v", "model.param=v_offset", "model.norm=pre")
 RECIPE_FIELDS = {"model": ("param", "norm"), "train": ("lr_schedule", "precision", "time_budget_s", "boundary_weight",
-                                                      "boundary_space", "position_weight", "clean_context"),
+                                                      "boundary_space", "position_weight", "clean_context",
+                                                      "wall_weight"),
                  "diffusion": ("guidance_path",)}
 PAPER = {"model": {"param": "x0", "norm": "post"}, "train": {"lr_schedule": "constant", "precision": "fp32",
                                                               "time_budget_s": 0.0, "boundary_weight": 0.0,
                                                               "boundary_space": "token", "position_weight": 0.0,
-                                                              "clean_context": 0.0},
+                                                              "clean_context": 0.0, "wall_weight": 0.0},
          "diffusion": {"guidance_path": "input"}}
 
 
@@ -371,6 +372,36 @@ def test_position_space_is_recorded_and_bad_combinations_are_one_error_before_tr
           progress=False)
     assert json.loads((tmp_path / "pw" / MANIFEST_FILE).read_text())["config"]["train"]["position_weight"] == 2.0
     assert not any((tmp_path / d).exists() for d in ("none", "off", "pos"))
+
+
+def test_wall_loss_is_the_mean_depth_of_kept_tokens_frames():
+    depth = lambda f: torch.relu(f[..., 0])  # noqa: E731  "inside a wall" = x > 0, depth x
+    pred = torch.full((2, 3, 4 * 2), -1.0)  # 2 windows x 3 tokens x 4 frames of (x, y), all free
+    kept = torch.tensor([[True, True, False], [True, True, True]])
+    assert float(wall_loss(pred, kept, 4, depth)) == 0.0
+    pred[0, 1, 0::2] = 0.5  # every frame of a kept token 0.5 deep
+    pred[0, 2, 0::2] = 9.0  # a cut-off token (pure noise) is not counted
+    assert float(wall_loss(pred, kept, 4, depth)) == pytest.approx(0.5 / 5)
+    pred[1, 0, 0] = 2.0  # one frame of four
+    assert float(wall_loss(pred, kept, 4, depth)) == pytest.approx((0.5 + 0.5) / 5)
+
+
+class _DataWithWalls(FakeData):
+    def wall_depth(self, cfg: Config):
+        return (lambda f: torch.relu(f[..., 0] - 0.5)), {"maze": "a test wall"}
+
+
+def test_wall_lever_is_recorded_and_data_without_walls_is_one_error_before_training(tmp_path):
+    train(tiny_cfg(4, "train.wall_weight=1", "train.ckpt_every=4"), _DataWithWalls(), tmp_path / "ok", progress=False)
+    m = json.loads((tmp_path / "ok" / MANIFEST_FILE).read_text())
+    assert m["config"]["train"]["wall_weight"] == 1.0 and m["wall_depth"] == {"maze": "a test wall"}
+    assert "train.wall_weight=1.0" in m["vs_paper"]
+    with pytest.raises(ConfigError, match="train.wall_weight=2.0: the pointmaze-medium data has no maze walls.*drop "
+                                          "train.wall_weight"):
+        train(tiny_cfg(4, "train.wall_weight=2"), FakeData(), tmp_path / "none", progress=False)
+    with pytest.raises(ConfigError, match="train.wall_weight"):
+        tiny_cfg(4, "train.wall_weight=-1")
+    assert not (tmp_path / "none").exists()
 
 
 def test_validation_loss_leaves_the_boundary_term_out_so_arms_compare():

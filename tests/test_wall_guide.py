@@ -70,3 +70,29 @@ def test_off_by_default_and_mazes_only():
     assert isinstance(on, WallGuide) and on.weight == 4.0 and on.margin == 0.5
     with pytest.raises(ConfigError, match="method.wall_guidance=2.0 needs a point or ant maze"):
         load_config(["env=cube-single", "method=fast-mctd-replan", "method.wall_guidance=2"])
+
+
+# ------------------------------------------------------------------ the wall loss (train.wall_weight)
+
+def test_wall_depth_reads_the_guides_distance_off_a_grid_and_points_out_of_walls():
+    from fmctd_dist.families.maze.wall_loss import WallDepth
+
+    depth, exact = WallDepth(WALLS, MEAN, STD), WallGuide(WALLS, MEAN, STD, 1.0, 0.0)
+    pts = norm(np.random.default_rng(0).uniform([-6, -6], [14, 10], (2000, 2)))  # the map, and 2 units around it
+    want = torch.relu(-exact.sdf(pts * torch.tensor(STD) + torch.tensor(MEAN))) / MAZE_UNIT
+    assert torch.allclose(depth(pts), want, atol=0.02)  # bilinear between grid points 0.1 apart
+    free = norm([MazeGeometry.cell_to_xy((1, 1)) + [0.3, -1.9], MazeGeometry.cell_to_xy((1, 2))])
+    assert depth(free).abs().max().item() == 0.0  # free space, even 0.1 from a wall: no data frame pays
+    p = norm([MazeGeometry.cell_to_xy((0, 1)) + [0.3, 0.5]]).requires_grad_(True)
+    depth(p).sum().backward()
+    assert -p.grad[0, 1] > 0 and abs(p.grad[0, 0].item()) < 1e-4  # out through the face, as the guide's gradient
+
+
+def test_maze_data_serve_the_wall_depth_of_their_own_maze():
+    from fmctd_dist.families.maze.data import NavigateDataset
+
+    cfg = load_config(["env=pointmaze-medium", "train.wall_weight=1"])
+    data = NavigateDataset.__new__(NavigateDataset)
+    data.manifest = {"obs_mean": [10.0, 10.0], "obs_std": [5.0, 5.0]}
+    depth, provenance = data.wall_depth(cfg)
+    assert provenance["maze"] == "pointmaze-medium" and depth.depth.max() > 0

@@ -173,6 +173,11 @@ class TrainConfig:
     # position-blind jitter as much as its position. 0 = off (the paper's).
     position_weight: float = spec(0.0, ge=0, why="weight of the position loss on each token's end frames through the "
                                                  "data's position readout (0 = off, the paper's)")
+    # Recipe lever against plans through walls (the lines below the paper): the mean depth inside the maze's
+    # walls of every predicted frame (the data module's ``wall_depth``; maze data only), each noise level alike.
+    # Zero on every data window. 0 = off (the paper's).
+    wall_weight: float = spec(0.0, ge=0, why="weight of the loss on predicted frames' depth inside the maze's walls "
+                                             "(0 = off, the paper's)")
     # Recipe lever against the plans' first-step jump (results §4, session 21): the sampler always feeds
     # the context token clean (timestep diffusion.stabilization - 1, scaled, no noise), but the paper's
     # training noises it at a random timestep (half the time in [0, 250), else anywhere), so that exact

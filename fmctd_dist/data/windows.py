@@ -70,12 +70,13 @@ class TrainData:
     """What the training loop needs: train sampler, fixed validation batches, digest, normaliser."""
 
     def __init__(self, train: WindowSampler, val: WindowSampler, digest: str, seed: int,
-                 provenance: dict | None = None, position_readout=None):
+                 provenance: dict | None = None, position_readout=None, wall_depth=None):
         self.train, self.val = train, val
         self.normaliser = train.normaliser
         self.digest, self.seed = digest, seed
         self.provenance = provenance or {}  # extra manifest fields the dataset asks a model to keep (visual: its VAE)
         self.position_readout = position_readout  # cfg -> (frames -> positions, provenance); None: frames have none
+        self.wall_depth = wall_depth  # cfg -> (frames -> depth inside walls, provenance); None: no maze walls
 
     @property
     def n_tokens(self) -> int:
@@ -96,4 +97,5 @@ def train_data(cfg, dataset) -> TrainData:
               normaliser=dataset.normaliser)
     train = WindowSampler(dataset.train, **kw, start_balance=cfg.train.start_balance)
     return TrainData(train, WindowSampler(dataset.val, **kw), dataset.digest, cfg.data.seed,  # val stays uniform
-                     getattr(dataset, "provenance", None), getattr(dataset, "position_readout", None))
+                     getattr(dataset, "provenance", None), getattr(dataset, "position_readout", None),
+                     getattr(dataset, "wall_depth", None))

@@ -37,7 +37,7 @@ PAPER_TRAINING = {"df": {"layers": 12, "batch_size": 1024, "steps": 200_005},
                   "diffuser": {"batch_size": 32, "steps": 20_000, "unet_channels": [32, 128, 256]}}
 PAPER_RECIPE = {"model.param": "x0", "model.norm": "post", "train.lr_schedule": "constant", "train.precision": "fp32",
                 "train.boundary_weight": 0.0, "train.boundary_space": "token",
-                "train.position_weight": 0.0, "train.clean_context": 0.0}
+                "train.position_weight": 0.0, "train.clean_context": 0.0, "train.wall_weight": 0.0}
 
 
 Readout = Callable[[torch.Tensor], torch.Tensor]  # normalised frames [..., d] -> standardised positions [..., 2]
@@ -77,7 +77,8 @@ class NoisingLoss(torch.nn.Module):
 class DFLoss(NoisingLoss):
     """Diffusion Forcing loss: per-token timesteps, length randomisation, min-SNR-weighted x0 MSE."""
 
-    def __init__(self, cfg: Config, device: torch.device, readout: Readout | None = None):
+    def __init__(self, cfg: Config, device: torch.device, readout: Readout | None = None,
+                 wall: Readout | None = None):
         super().__init__(cfg, device)
         snr = self.ab / (1.0 - self.ab)
         self.register_buffer("w_snr", torch.as_tensor(np.minimum(snr, cfg.diffusion.snr_clip), dtype=torch.float32,
@@ -88,6 +89,7 @@ class DFLoss(NoisingLoss):
         self.boundary_readout = readout if cfg.train.boundary_space == "position" else None
         self.position_weight = cfg.train.position_weight
         self.clean_context = cfg.train.clean_context
+        self.wall, self.wall_weight = wall, cfg.train.wall_weight  # frames -> depth inside walls (frozen)
 
     def forward(self, model: DFTransformer, x0: torch.Tensor, gen: torch.Generator,
                 validation: bool = False) -> torch.Tensor:
@@ -118,6 +120,8 @@ class DFLoss(NoisingLoss):
                                                                self.boundary_readout)
         if not validation and self.position_weight:
             loss = loss + self.position_weight * position_loss(pred, x0, weight, self.frame_stack, self.readout)
+        if not validation and self.wall_weight:
+            loss = loss + self.wall_weight * wall_loss(pred, ~cut, self.frame_stack, self.wall)
         return loss
 
 
@@ -151,6 +155,15 @@ def position_loss(pred: torch.Tensor, x0: torch.Tensor, weight: torch.Tensor, fr
     return (weight[..., None, None] * err).mean()
 
 
+def wall_loss(pred: torch.Tensor, kept: torch.Tensor, frame_stack: int, depth: Readout) -> torch.Tensor:
+    """Mean depth inside the walls (``depth``: frames -> maze units, 0 in free space) of every predicted frame of
+    the kept tokens (kept [B, T]; the cut-off ones are pure noise), each noise level alike (train.wall_weight):
+    routes are chosen at high noise, where the min-SNR weight is near zero. Zero on any data window."""
+    b, t, dd = pred.shape
+    frames = pred.reshape(b, t, frame_stack, dd // frame_stack)
+    return (depth(frames).mean(-1) * kept).sum() / kept.sum().clamp(min=1)
+
+
 class DiffuserLoss(NoisingLoss):
     """Diffuser loss (Janner et al.): one uniform timestep per sample, start token clean, plain x0 MSE.
 
@@ -180,9 +193,29 @@ class DiffuserLoss(NoisingLoss):
         return (self.frame_weights(t - 1, dev)[None, :, None] * err).mean()
 
 
-def make_loss(cfg: Config, device: torch.device, readout: Readout | None = None) -> torch.nn.Module:
+def make_loss(cfg: Config, device: torch.device, readout: Readout | None = None,
+              wall: Readout | None = None) -> torch.nn.Module:
     """The training loss of ``cfg.model.kind`` (df: DFLoss, diffuser: DiffuserLoss)."""
-    return DiffuserLoss(cfg, device) if cfg.model.kind == "diffuser" else DFLoss(cfg, device, readout)
+    return DiffuserLoss(cfg, device) if cfg.model.kind == "diffuser" else DFLoss(cfg, device, readout, wall)
+
+
+def wall_depth(cfg: Config, data: Any, device: torch.device) -> tuple[Readout | None, dict[str, Any]]:
+    """The data's frozen wall depth (``data.wall_depth(cfg) -> (frames -> depth, provenance)``) when
+    train.wall_weight > 0, and what the manifest records; data or a model that cannot serve it is one ConfigError."""
+    if not cfg.train.wall_weight:
+        return None, {}
+    fix = "drop train.wall_weight (0 = off, the paper's)"
+    if cfg.model.kind != "df":
+        raise ConfigError(f"train.wall_weight={cfg.train.wall_weight} is a Diffusion Forcing lever, but "
+                          f"model.kind={cfg.model.kind}; {fix}")
+    make = getattr(data, "wall_depth", None)
+    if make is None:  # a TrainData over data without walls holds None
+        raise ConfigError(f"train.wall_weight={cfg.train.wall_weight}: the {cfg.env.name} data has no maze walls to "
+                          f"measure; {fix}")
+    depth, provenance = make(cfg)
+    if isinstance(depth, torch.nn.Module):
+        depth = depth.to(device).requires_grad_(False)
+    return depth, {"wall_depth": provenance}
 
 
 def position_readout(cfg: Config, data: Any, device: torch.device) -> tuple[Readout | None, dict[str, Any]]:
@@ -280,7 +313,8 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
         model = build_model(cfg.model, cfg.n_tokens, cfg.token_dim, diffusion_cfg=cfg.diffusion).to(device)
     opt = torch.optim.AdamW(model.parameters(), lr=tc.lr, betas=(0.9, 0.999), weight_decay=tc.weight_decay)
     readout, readout_provenance = position_readout(cfg, data, device)
-    loss_fn = make_loss(cfg, device, readout)
+    wall, wall_provenance = wall_depth(cfg, data, device)
+    loss_fn = make_loss(cfg, device, readout, wall)
     rng = stream_rng(tc.seed, data.seed)
     gen = torch.Generator(device=device).manual_seed(tc.seed)
     saved: dict[str, Any] = {"history": {"val": [], "train": []}}  # step, clock and history to continue from
@@ -325,6 +359,7 @@ def train(cfg: Config, data: TrainDataLike, out_dir: str | Path, progress: bool 
             "normaliser": {"mean": data.normaliser.mean.tolist(), "std": data.normaliser.std.tolist()}}
     base.update(getattr(data, "provenance", {}))  # e.g. the visual maze's VAE and latent store
     base.update(readout_provenance)  # the position levers: which readout measured their losses
+    base.update(wall_provenance)  # the wall lever: which maze and grid
     if init_from is not None:
         base["init_from"] = init_from
 

@@ -191,6 +191,14 @@ class NavigateDataset(SplitStates):
         then equals token, and train.position_weight weighs the token loss's end frames again)."""
         return _frame_xy, {"readout": "the frames' normalised x, y"}
 
+    def wall_depth(self, cfg: Config) -> tuple[Any, dict[str, Any]]:
+        """Frames -> their depth inside this maze's walls (train.wall_weight; ``maze/wall_loss.py``)."""
+        from fmctd_dist.families.maze.wall_loss import GRID_STEP, wall_depth
+
+        norm = self.normaliser
+        return (wall_depth(cfg.env.name, norm.mean.tolist(), norm.std.tolist()),
+                {"maze": cfg.env.name, "grid_step": GRID_STEP})
+
 
 def _frame_xy(frames):
     """Normalised frames [..., 2] -> the same positions (torch or numpy)."""
