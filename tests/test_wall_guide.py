@@ -96,3 +96,13 @@ def test_maze_data_serve_the_wall_depth_of_their_own_maze():
     data.manifest = {"obs_mean": [10.0, 10.0], "obs_std": [5.0, 5.0]}
     depth, provenance = data.wall_depth(cfg)
     assert provenance["maze"] == "pointmaze-medium" and depth.depth.max() > 0
+
+
+def test_the_wall_depth_probe_reads_a_checkpoints_predictions_on_its_own_maze(tiny_checkpoint):
+    from conftest import load_job
+
+    job = load_job("wall_depth")
+    rows = job.wall_depths(tiny_checkpoint[1])
+    assert [k for k, *_ in rows] == list(job.TIMESTEPS)
+    assert all(0 <= share <= 1 and depth >= 0 and mse > 0 for _, share, depth, mse in rows)
+    assert rows[-1][3] > rows[0][3]  # from pure noise the prediction is further from the data
