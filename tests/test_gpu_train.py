@@ -73,8 +73,9 @@ def test_ant_set_dry_run_makes_its_data_with_workers_and_fine_tunes(tmp_path):
     assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
     with tarfile.open(out / "antmaze-medium-h5.tar") as tar:
         manifest = json.load(tar.extractfile("antmaze-medium-h5/manifest.json"))
-    assert (manifest["config"]["env"]["name"] == "antmaze-medium"
-            and manifest["config"]["train"]["boundary_weight"] == 3.0)
+    train = manifest["config"]["train"]
+    assert (manifest["config"]["env"]["name"] == "antmaze-medium" and train["boundary_weight"] == 3.0
+            and train["wall_weight"] == 0.1 and manifest["wall_depth"]["maze"] == "antmaze-medium")
     data = json.loads(next((tmp_path / "runs" / "data").glob("antmaze-medium-*/manifest.json")).read_text())
     assert data["generation"]["workers"] == 2
 
